@@ -1,0 +1,109 @@
+//! Small geometric helpers shared by the methods and the checks.
+
+use glam::DVec3;
+
+/// Twice the area vector of a triangle.
+#[inline]
+pub fn tri_normal_raw(a: DVec3, b: DVec3, c: DVec3) -> DVec3 {
+    (b - a).cross(c - a)
+}
+
+/// Area of a triangle.
+#[inline]
+pub fn tri_area(a: DVec3, b: DVec3, c: DVec3) -> f64 {
+    0.5 * tri_normal_raw(a, b, c).length()
+}
+
+/// Circumradius of a triangle (infinite for a degenerate one).
+pub fn circumradius(a: DVec3, b: DVec3, c: DVec3) -> f64 {
+    let la = (b - c).length();
+    let lb = (a - c).length();
+    let lc = (a - b).length();
+    let area2 = tri_normal_raw(a, b, c).length(); // 2 * area
+    if area2 <= 0.0 {
+        return f64::INFINITY;
+    }
+    la * lb * lc / (2.0 * area2)
+}
+
+/// Paper 002's quality `Qt = shortest edge / circumradius` (sqrt 3 for equilateral).
+pub fn quality(a: DVec3, b: DVec3, c: DVec3) -> f64 {
+    let r = circumradius(a, b, c);
+    if !r.is_finite() || r <= 0.0 {
+        return 0.0;
+    }
+    let s = (b - c).length().min((a - c).length()).min((a - b).length());
+    s / r
+}
+
+/// The three interior angles (radians) at a, b, c.
+pub fn angles(a: DVec3, b: DVec3, c: DVec3) -> [f64; 3] {
+    [angle_at(a, b, c), angle_at(b, c, a), angle_at(c, a, b)]
+}
+
+/// The angle at `p` between the directions to `q` and `r` (radians, 0 when undefined).
+pub fn angle_at(p: DVec3, q: DVec3, r: DVec3) -> f64 {
+    let u = q - p;
+    let v = r - p;
+    let cr = u.cross(v).length();
+    let dt = u.dot(v);
+    if cr == 0.0 && dt == 0.0 {
+        0.0
+    } else {
+        cr.atan2(dt)
+    }
+}
+
+/// Cotangent of the angle at `p` in triangle (p, q, r), clamped to a safe range.
+pub fn cot_at(p: DVec3, q: DVec3, r: DVec3) -> f64 {
+    let u = q - p;
+    let v = r - p;
+    let cr = u.cross(v).length();
+    if cr <= 1e-300 {
+        return 0.0;
+    }
+    (u.dot(v) / cr).clamp(-1e3, 1e3)
+}
+
+/// Best-fit plane normal of a closed polygon (Newell's method), unit or zero.
+pub fn newell_normal(pts: &[DVec3]) -> DVec3 {
+    let mut n = DVec3::ZERO;
+    let k = pts.len();
+    for i in 0..k {
+        let a = pts[i];
+        let b = pts[(i + 1) % k];
+        n.x += (a.y - b.y) * (a.z + b.z);
+        n.y += (a.z - b.z) * (a.x + b.x);
+        n.z += (a.x - b.x) * (a.y + b.y);
+    }
+    n.normalize_or_zero()
+}
+
+/// Centroid of points.
+pub fn centroid(pts: &[DVec3]) -> DVec3 {
+    if pts.is_empty() {
+        return DVec3::ZERO;
+    }
+    pts.iter().copied().sum::<DVec3>() / pts.len() as f64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn equilateral_quality_is_sqrt3() {
+        let a = DVec3::new(0.0, 0.0, 0.0);
+        let b = DVec3::new(1.0, 0.0, 0.0);
+        let c = DVec3::new(0.5, 3f64.sqrt() / 2.0, 0.0);
+        assert!((quality(a, b, c) - 3f64.sqrt()).abs() < 1e-12);
+        let s: f64 = angles(a, b, c).iter().sum();
+        assert!((s - std::f64::consts::PI).abs() < 1e-12);
+    }
+
+    #[test]
+    fn degenerate_quality_is_zero() {
+        let a = DVec3::ZERO;
+        assert_eq!(quality(a, DVec3::X, DVec3::X * 2.0), 0.0);
+    }
+}

@@ -1,0 +1,308 @@
+//! Hole filling: the size-based dispatch of paper 002 (Feng et al. 2020, §3) and
+//! the fallback chain.
+//!
+//! Each method is a module with a `fill(&FillContext) -> Result<Patch, FillError>`.
+//! A method only proposes a [`Patch`]; this module checks it ([`crate::check`]),
+//! and only an accepted patch is applied to the mesh, so a rejected one needs no undo.
+//! Every hole ends filled, skipped (with the rule) or failed (with every attempt and why).
+
+pub mod advancing_front;
+pub mod fan;
+pub mod geom;
+pub mod min_area_fair;
+
+use crate::check::Checker;
+use crate::mesh::{Mesh, VertexId};
+use crate::policy::{Method, Policy};
+use crate::report::{Attempt, HoleClass, HoleReport, HoleStatus, Outcome};
+use glam::DVec3;
+use std::time::{Duration, Instant};
+
+/// A boundary loop to fill.
+#[derive(Clone, Debug)]
+pub struct Hole {
+    /// Index of the hole in the log.
+    pub id: usize,
+    /// The loop, oriented so that a patch triangle `(v[i], v[i+1], x)` agrees with the
+    /// surrounding faces.
+    pub vertices: Vec<VertexId>,
+    /// Sum of boundary edge lengths.
+    pub perimeter: f64,
+    /// Mean boundary edge length.
+    pub mean_edge_length: f64,
+    /// Size class.
+    pub class: HoleClass,
+}
+
+impl Hole {
+    /// Measures a loop.
+    pub fn new(id: usize, mesh: &Mesh, vertices: Vec<VertexId>, policy: &Policy) -> Hole {
+        let k = vertices.len();
+        let perimeter: f64 = (0..k)
+            .map(|i| (mesh.pos(vertices[(i + 1) % k]) - mesh.pos(vertices[i])).length())
+            .sum();
+        let class = if k <= policy.dispatch.small_max {
+            HoleClass::Small
+        } else if k <= policy.dispatch.middle_max {
+            HoleClass::Middle
+        } else {
+            HoleClass::Large
+        };
+        Hole {
+            id,
+            mean_edge_length: if k > 0 { perimeter / k as f64 } else { 0.0 },
+            vertices,
+            perimeter,
+            class,
+        }
+    }
+    /// Boundary vertex count.
+    pub fn len(&self) -> usize {
+        self.vertices.len()
+    }
+    /// True for an empty loop.
+    pub fn is_empty(&self) -> bool {
+        self.vertices.is_empty()
+    }
+}
+
+/// A proposed patch. Vertex index `i < k` (k = loop length) is the hole's `i`-th
+/// boundary vertex; `i >= k` is `new_vertices[i - k]`. Triangles are oriented like
+/// the hole (see [`Hole::vertices`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Patch {
+    pub new_vertices: Vec<DVec3>,
+    pub triangles: Vec<[u32; 3]>,
+}
+
+/// Why a method produced no patch.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum FillError {
+    /// The per-hole time limit ran out.
+    #[error("time limit reached")]
+    Timeout,
+    /// The method cannot fill this hole.
+    #[error("{0}")]
+    Failed(String),
+}
+
+/// A point in time past which a method gives up with [`FillError::Timeout`].
+#[derive(Clone, Copy, Debug)]
+pub struct Deadline(pub Option<Instant>);
+
+impl Deadline {
+    /// A deadline `ms` from now (0: none).
+    pub fn after_ms(ms: u64) -> Deadline {
+        if ms == 0 {
+            Deadline(None)
+        } else {
+            Deadline(Some(Instant::now() + Duration::from_millis(ms)))
+        }
+    }
+    /// No deadline.
+    pub fn none() -> Deadline {
+        Deadline(None)
+    }
+    /// `Err(Timeout)` once the deadline has passed.
+    pub fn check(&self) -> Result<(), FillError> {
+        match self.0 {
+            Some(t) if Instant::now() >= t => Err(FillError::Timeout),
+            _ => Ok(()),
+        }
+    }
+}
+
+/// What a method sees: the mesh (read-only), the hole, the policy, the deadline.
+pub struct FillContext<'a> {
+    pub mesh: &'a Mesh,
+    pub hole: &'a Hole,
+    pub policy: &'a Policy,
+    pub deadline: Deadline,
+}
+
+impl FillContext<'_> {
+    /// Position of patch vertex `i` (boundary vertices only: `i < k`).
+    pub fn boundary_pos(&self, i: usize) -> DVec3 {
+        self.mesh.pos(self.hole.vertices[i])
+    }
+    /// Positions of the loop.
+    pub fn boundary_positions(&self) -> Vec<DVec3> {
+        self.hole.vertices.iter().map(|&v| self.mesh.pos(v)).collect()
+    }
+}
+
+/// Runs one method.
+pub fn run_method(method: Method, ctx: &FillContext) -> Result<Patch, FillError> {
+    match method {
+        Method::Fan => fan::fill(ctx),
+        Method::MinAreaFair => min_area_fair::fill(ctx),
+        Method::AdvancingFront => advancing_front::fill(ctx),
+    }
+}
+
+/// The method list of a class.
+pub fn methods_for(policy: &Policy, class: HoleClass) -> &[Method] {
+    match class {
+        HoleClass::Small => &policy.dispatch.small,
+        HoleClass::Middle => &policy.dispatch.middle,
+        HoleClass::Large => &policy.dispatch.large,
+    }
+}
+
+/// Fills one hole with the class's method list, checking every patch and applying
+/// the first accepted one. Returns the hole's log entry.
+pub fn fill_hole(mesh: &mut Mesh, hole: &Hole, policy: &Policy, checker: &mut Checker) -> HoleReport {
+    let t0 = Instant::now();
+    let mut rep = HoleReport {
+        id: hole.id,
+        boundary_vertices: hole.len(),
+        perimeter: hole.perimeter,
+        mean_edge_length: hole.mean_edge_length,
+        class: hole.class,
+        method: None,
+        tried: Vec::new(),
+        status: HoleStatus::Failed,
+        reason: String::new(),
+        added_vertices: 0,
+        added_faces: 0,
+        quality: None,
+        ms: 0.0,
+    };
+    if hole.len() < 3 {
+        rep.reason = format!("a loop of {} boundary vertices cannot be filled", hole.len());
+        rep.ms = ms_since(t0);
+        return rep;
+    }
+    for &method in methods_for(policy, hole.class) {
+        let ta = Instant::now();
+        let ctx = FillContext {
+            mesh,
+            hole,
+            policy,
+            deadline: Deadline::after_ms(policy.limits.hole_time_ms),
+        };
+        let result = run_method(method, &ctx).and_then(|p| {
+            ctx.deadline.check()?;
+            Ok(p)
+        });
+        let attempt = |outcome, reason: String| Attempt {
+            method,
+            outcome,
+            reason,
+            ms: ms_since(ta),
+        };
+        let patch = match result {
+            Ok(p) => p,
+            Err(FillError::Timeout) => {
+                rep.tried.push(attempt(
+                    Outcome::Timeout,
+                    format!("time limit of {} ms reached", policy.limits.hole_time_ms),
+                ));
+                continue;
+            }
+            Err(FillError::Failed(why)) => {
+                rep.tried.push(attempt(Outcome::Error, why));
+                continue;
+            }
+        };
+        let quality = match checker.check_patch(mesh, &hole.vertices, &patch, &policy.checks) {
+            Ok(q) => q,
+            Err(why) => {
+                rep.tried.push(attempt(Outcome::Rejected, why.to_string()));
+                continue;
+            }
+        };
+        match apply_patch(mesh, hole, &patch) {
+            Ok(faces) => {
+                checker.commit(mesh, faces);
+                rep.tried.push(attempt(Outcome::Accepted, String::new()));
+                rep.method = Some(method);
+                rep.status = HoleStatus::Filled;
+                rep.added_vertices = patch.new_vertices.len();
+                rep.added_faces = patch.triangles.len();
+                rep.quality = Some(quality);
+                rep.ms = ms_since(t0);
+                return rep;
+            }
+            Err(why) => {
+                rep.tried.push(attempt(Outcome::Rejected, why));
+            }
+        }
+    }
+    rep.reason = if rep.tried.is_empty() {
+        "no method configured".into()
+    } else {
+        let list: Vec<String> = rep
+            .tried
+            .iter()
+            .map(|a| format!("{}: {}", a.method.name(), a.reason))
+            .collect();
+        format!("every method failed ({})", list.join("; "))
+    };
+    rep.ms = ms_since(t0);
+    rep
+}
+
+/// Adds a checked patch to the mesh. Returns the range of new face indices.
+/// On failure the mesh is left as it was.
+pub fn apply_patch(mesh: &mut Mesh, hole: &Hole, patch: &Patch) -> Result<std::ops::Range<usize>, String> {
+    let k = hole.len();
+    let nv0 = mesh.num_vertices();
+    let nf0 = mesh.num_faces();
+    let colors = mesh.colors.as_ref().map(|c| {
+        let bc: Vec<[f32; 3]> = hole.vertices.iter().map(|v| c[v.idx()]).collect();
+        bc
+    });
+    for &p in &patch.new_vertices {
+        let col = colors.as_ref().map(|bc| interpolate_color(mesh, hole, bc, p));
+        mesh.add_vertex(p, col);
+    }
+    let map = |i: u32| -> Result<VertexId, String> {
+        let i = i as usize;
+        if i < k {
+            Ok(hole.vertices[i])
+        } else if i - k < patch.new_vertices.len() {
+            Ok(VertexId::from_idx(nv0 + i - k))
+        } else {
+            Err(format!("patch index {i} out of range"))
+        }
+    };
+    let mut faces = Vec::with_capacity(patch.triangles.len());
+    for t in &patch.triangles {
+        match (map(t[0]), map(t[1]), map(t[2])) {
+            (Ok(a), Ok(b), Ok(c)) => faces.push([a, b, c]),
+            _ => {
+                mesh.truncate_vertices(nv0);
+                return Err("patch references a vertex that does not exist".into());
+            }
+        }
+    }
+    if let Err(e) = mesh.add_faces(&faces) {
+        mesh.truncate_vertices(nv0);
+        return Err(format!("patch would break the mesh: {e}"));
+    }
+    Ok(nf0..mesh.num_faces())
+}
+
+/// Colour of a new vertex: inverse-distance weighting of the loop's colours.
+fn interpolate_color(mesh: &Mesh, hole: &Hole, bc: &[[f32; 3]], p: DVec3) -> [f32; 3] {
+    let mut acc = [0.0f64; 3];
+    let mut wsum = 0.0;
+    for (i, &v) in hole.vertices.iter().enumerate() {
+        let d = (mesh.pos(v) - p).length_squared().max(1e-300);
+        let w = 1.0 / d;
+        for c in 0..3 {
+            acc[c] += w * bc[i][c] as f64;
+        }
+        wsum += w;
+    }
+    if wsum > 0.0 {
+        [(acc[0] / wsum) as f32, (acc[1] / wsum) as f32, (acc[2] / wsum) as f32]
+    } else {
+        [0.5, 0.5, 0.5]
+    }
+}
+
+fn ms_since(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1000.0
+}

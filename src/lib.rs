@@ -1,0 +1,233 @@
+//! holefill: repairs scanned triangle meshes by closing every hole with a method
+//! chosen by the hole's size under a TOML policy.
+//!
+//! The public API is three steps: [`read`] a file into a triangle soup, [`repair`] it
+//! under a [`Policy`], [`write`] the result. The library knows nothing of folders or
+//! daemons.
+//!
+//! ```no_run
+//! use holefill::{policy::Policy, read, repair, write};
+//! let raw = read("scan.obj".as_ref(), None).unwrap();
+//! let (out, report) = repair(&raw, &Policy::default()).unwrap();
+//! write("repaired.obj".as_ref(), &out, None).unwrap();
+//! println!("{} filled", report.summary.filled);
+//! ```
+#![forbid(unsafe_code)]
+
+pub mod check;
+pub mod fill;
+pub mod io;
+pub mod mesh;
+pub mod policy;
+pub mod report;
+pub mod smooth;
+
+use fill::Hole;
+use io::{Format, IoError, RawMesh};
+use mesh::{FaceId, Mesh, VertexId};
+use policy::Policy;
+use report::{Counts, HoleReport, HoleStatus, RepairReport};
+use std::path::Path;
+use std::time::Instant;
+
+/// Why a mesh could not be repaired at all (holes that fail are not errors: they are
+/// reported in the log).
+#[derive(Debug, thiserror::Error)]
+pub enum RepairError {
+    /// The input has no triangles.
+    #[error("the mesh has no usable triangles")]
+    Empty,
+    /// The input's topology could not be resolved into a valid mesh.
+    #[error("the mesh topology could not be resolved: {0}")]
+    Topology(String),
+}
+
+/// Reads a mesh file (format from `format`, else from the extension).
+pub fn read(path: &Path, format: Option<Format>) -> Result<RawMesh, IoError> {
+    io::read(path, format)
+}
+
+/// Writes a mesh file atomically (format from `format`, else from the extension).
+pub fn write(path: &Path, raw: &RawMesh, format: Option<Format>) -> Result<(), IoError> {
+    io::write(path, raw, format)
+}
+
+/// Repairs a triangle soup: builds the mesh, cleans the boundary, smooths if the
+/// policy says so, and fills every hole. Returns the repaired soup (input vertices
+/// first, unmoved unless smoothing is on) and the repair log.
+pub fn repair(raw: &RawMesh, policy: &Policy) -> Result<(RawMesh, RepairReport), RepairError> {
+    let mut report = RepairReport::new(policy);
+    report.resolved.reader = raw.notes.clone();
+    let (mut mesh, build) = Mesh::from_raw(raw);
+    report.resolved.mesh = build;
+    if mesh.num_faces() == 0 {
+        return Err(RepairError::Empty);
+    }
+    mesh.validate().map_err(RepairError::Topology)?;
+    report.before = counts(&mesh);
+
+    if policy.clean.remove_teeth {
+        let (m, removed) = remove_teeth(mesh);
+        mesh = m;
+        report.resolved.tooth_faces_removed = removed;
+        mesh.validate().map_err(RepairError::Topology)?;
+    }
+
+    if policy.smooth.enabled {
+        let t = Instant::now();
+        report.smoothing = Some(smooth::smooth(&mut mesh, &policy.smooth));
+        report.timings.smooth_ms = t.elapsed().as_secs_f64() * 1000.0;
+    }
+
+    let t = Instant::now();
+    report.holes = fill_all(&mut mesh, policy, &mut report.resolved.degenerate_loops);
+    report.timings.fill_ms = t.elapsed().as_secs_f64() * 1000.0;
+    report.after = counts(&mesh);
+    report.summarise();
+    Ok((mesh.to_raw(raw), report))
+}
+
+fn counts(mesh: &Mesh) -> Counts {
+    Counts {
+        vertices: mesh.num_vertices(),
+        faces: mesh.num_faces(),
+        boundary_loops: mesh.topo.boundary_loops().len(),
+    }
+}
+
+/// Removes tooth faces (two or more edges on the boundary) until none is left,
+/// never removing the last face of a component (ALGORITHMS A2).
+fn remove_teeth(mut mesh: Mesh) -> (Mesh, usize) {
+    let mut removed = 0;
+    for _round in 0..8 {
+        let mut teeth: Vec<FaceId> = Vec::new();
+        for f in 0..mesh.num_faces() {
+            let f = FaceId::from_idx(f);
+            let open = (0..3).filter(|&c| mesh.topo.twin(f.halfedge(c)).is_none()).count();
+            // a face with all three edges open is a whole component: keep it
+            if open == 2 {
+                teeth.push(f);
+            }
+        }
+        if teeth.is_empty() {
+            break;
+        }
+        removed += teeth.len();
+        let (m, _) = mesh.without_faces(&teeth);
+        mesh = m;
+    }
+    (mesh, removed)
+}
+
+/// Finds the holes, applies the outer-border rule and fills the rest.
+fn fill_all(mesh: &mut Mesh, policy: &Policy, degenerate: &mut usize) -> Vec<HoleReport> {
+    let loops = mesh.topo.boundary_loops();
+    let comp = components(mesh);
+    let diag = mesh.bbox_diagonal();
+    let holes: Vec<Hole> = loops
+        .into_iter()
+        .enumerate()
+        .map(|(i, l)| Hole::new(i, mesh, l, policy))
+        .collect();
+    // longest loop (by perimeter) of each component
+    let loop_comp: Vec<usize> = holes
+        .iter()
+        .map(|h| {
+            h.vertices
+                .first()
+                .and_then(|&v| mesh.topo.anchor(v))
+                .map(|a| comp[a.face().idx()])
+                .unwrap_or(usize::MAX)
+        })
+        .collect();
+    let mut longest: std::collections::HashMap<usize, usize> = std::collections::HashMap::new();
+    for (i, h) in holes.iter().enumerate() {
+        let e = longest.entry(loop_comp[i]).or_insert(i);
+        if h.perimeter > holes[*e].perimeter {
+            *e = i;
+        }
+    }
+    let mut checker = check::Checker::new(mesh);
+    let mut out = Vec::with_capacity(holes.len());
+    for (i, hole) in holes.iter().enumerate() {
+        if hole.len() < 3 {
+            *degenerate += 1;
+        }
+        if let Some(rule) = border_rule(mesh, hole, policy, diag, longest.get(&loop_comp[i]) == Some(&i)) {
+            out.push(HoleReport {
+                id: hole.id,
+                boundary_vertices: hole.len(),
+                perimeter: hole.perimeter,
+                mean_edge_length: hole.mean_edge_length,
+                class: hole.class,
+                method: None,
+                tried: Vec::new(),
+                status: HoleStatus::Skipped,
+                reason: rule,
+                added_vertices: 0,
+                added_faces: 0,
+                quality: None,
+                ms: 0.0,
+            });
+            continue;
+        }
+        out.push(fill::fill_hole(mesh, hole, policy, &mut checker));
+    }
+    out
+}
+
+/// The outer-border rule: `Some(reason)` when the loop is skipped.
+fn border_rule(mesh: &Mesh, hole: &Hole, policy: &Policy, diag: f64, is_longest: bool) -> Option<String> {
+    let b = &policy.border;
+    if b.only_longest && !is_longest {
+        return None;
+    }
+    if b.max_vertices > 0 && hole.len() > b.max_vertices {
+        return Some(format!(
+            "outer border: {} boundary vertices > border.max_vertices = {}",
+            hole.len(),
+            b.max_vertices
+        ));
+    }
+    if b.max_bbox_share > 0.0 && diag > 0.0 {
+        let pts: Vec<_> = hole.vertices.iter().map(|&v: &VertexId| mesh.pos(v)).collect();
+        let lo = pts.iter().fold(glam::DVec3::splat(f64::INFINITY), |a, p| a.min(*p));
+        let hi = pts.iter().fold(glam::DVec3::splat(f64::NEG_INFINITY), |a, p| a.max(*p));
+        let share = (hi - lo).length() / diag;
+        if share > b.max_bbox_share {
+            return Some(format!(
+                "outer border: loop spans {:.2} of the mesh's bounding-box diagonal > border.max_bbox_share = {}",
+                share, b.max_bbox_share
+            ));
+        }
+    }
+    None
+}
+
+/// Connected component of every face (through twins).
+fn components(mesh: &Mesh) -> Vec<usize> {
+    let nf = mesh.num_faces();
+    let mut comp = vec![usize::MAX; nf];
+    let mut stack = Vec::new();
+    let mut next = 0;
+    for s in 0..nf {
+        if comp[s] != usize::MAX {
+            continue;
+        }
+        comp[s] = next;
+        stack.push(s);
+        while let Some(f) = stack.pop() {
+            for c in 0..3 {
+                if let Some(t) = mesh.topo.twin(FaceId::from_idx(f).halfedge(c)) {
+                    let g = t.face().idx();
+                    if comp[g] == usize::MAX {
+                        comp[g] = next;
+                        stack.push(g);
+                    }
+                }
+            }
+        }
+        next += 1;
+    }
+    comp
+}

@@ -1,0 +1,200 @@
+//! The `holefill` command: `fill` (one-shot), `check-policy`, `watch` (the daemon).
+#![forbid(unsafe_code)]
+
+mod daemon;
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+use holefill::io::{Format, IoError};
+use holefill::policy::Policy;
+use holefill::report::{FileRef, HoleStatus};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+/// Exit statuses (sysexits.h), so that scripts can tell permanent from retryable failures.
+pub mod exit {
+    /// Every hole filled or skipped by a policy rule.
+    pub const OK: u8 = 0;
+    /// A usage error or an invalid policy given to `check-policy`.
+    pub const USAGE: u8 = 1;
+    /// Some hole failed; the output was written with those holes open.
+    pub const HOLES_FAILED: u8 = 2;
+    /// The input is unreadable or malformed; nothing was written (EX_DATAERR).
+    pub const DATAERR: u8 = 65;
+    /// An internal error (EX_SOFTWARE).
+    pub const SOFTWARE: u8 = 70;
+    /// An I/O error such as a full disk; nothing partial was left behind (EX_IOERR).
+    pub const IOERR: u8 = 74;
+    /// The policy is invalid (EX_CONFIG).
+    pub const CONFIG: u8 = 78;
+}
+
+#[derive(Parser)]
+#[command(name = "holefill", version, about = "Repairs scanned triangle meshes: closes every hole under a TOML policy")]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Repair one mesh: fill its holes and write the result (and the repair log).
+    Fill(FillArgs),
+    /// Validate a policy file: exit 0 when valid, 1 with the error otherwise.
+    CheckPolicy {
+        /// The policy file.
+        file: PathBuf,
+    },
+    /// Watch an inbox and repair every mesh dropped into it (the daemon).
+    Watch(daemon::WatchArgs),
+}
+
+#[derive(clap::Args)]
+struct FillArgs {
+    /// Input mesh (.obj .ply .stl .off).
+    input: PathBuf,
+    /// Output mesh; written atomically.
+    output: PathBuf,
+    /// Policy file (TOML); the built-in default policy when absent.
+    #[arg(long)]
+    policy: Option<PathBuf>,
+    /// Write the repair log (JSON) here.
+    #[arg(long)]
+    report: Option<PathBuf>,
+    /// Output format (obj, ply, stl, off); default: the input's format.
+    #[arg(long)]
+    format: Option<String>,
+    /// Print nothing but errors and the FILL_TIME_S line.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match cli.cmd {
+        Cmd::Fill(args) => ExitCode::from(run_fill(&args)),
+        Cmd::CheckPolicy { file } => match Policy::from_file(&file) {
+            Ok(_) => {
+                println!("{}: ok", file.display());
+                ExitCode::from(exit::OK)
+            }
+            Err(e) => {
+                eprintln!("error: {e}");
+                ExitCode::from(exit::USAGE)
+            }
+        },
+        Cmd::Watch(args) => match daemon::run(args) {
+            Ok(()) => ExitCode::from(exit::OK),
+            Err(e) => {
+                eprintln!("error: {e:#}");
+                ExitCode::from(exit::CONFIG)
+            }
+        },
+    }
+}
+
+fn run_fill(args: &FillArgs) -> u8 {
+    match fill(args) {
+        Ok(code) => code,
+        Err(Failure(code, msg)) => {
+            eprintln!("error: {msg}");
+            code
+        }
+    }
+}
+
+struct Failure(u8, String);
+
+fn io_failure(e: IoError) -> Failure {
+    if e.is_malformed() {
+        Failure(exit::DATAERR, e.to_string())
+    } else {
+        Failure(exit::IOERR, e.to_string())
+    }
+}
+
+fn fill(args: &FillArgs) -> Result<u8, Failure> {
+    let policy = match &args.policy {
+        Some(p) => Policy::from_file(p).map_err(|e| Failure(exit::CONFIG, e.to_string()))?,
+        None => Policy::default_policy(),
+    };
+    let in_format = Format::from_path(&args.input).ok_or_else(|| {
+        Failure(
+            exit::DATAERR,
+            format!("{}: unsupported format (expected .obj, .ply, .stl or .off)", args.input.display()),
+        )
+    })?;
+    let out_format = match &args.format {
+        Some(name) => Format::from_name(name)
+            .ok_or_else(|| Failure(exit::USAGE, format!("--format {name}: expected obj, ply, stl or off")))?,
+        None => in_format,
+    };
+
+    let t = Instant::now();
+    let raw = holefill::read(&args.input, Some(in_format)).map_err(io_failure)?;
+    let read_ms = t.elapsed().as_secs_f64() * 1000.0;
+
+    let (out, mut report) = holefill::repair(&raw, &policy)
+        .map_err(|e| Failure(exit::DATAERR, format!("{}: {e}", args.input.display())))?;
+    report.timings.read_ms = read_ms;
+    report.input = Some(FileRef {
+        path: args.input.display().to_string(),
+        format: in_format,
+    });
+    report.output = Some(FileRef {
+        path: args.output.display().to_string(),
+        format: out_format,
+    });
+
+    if !args.quiet {
+        for h in &report.holes {
+            let method = h.method.map(|m| m.name()).unwrap_or("-");
+            let status = match h.status {
+                HoleStatus::Filled => "filled",
+                HoleStatus::Skipped => "skipped",
+                HoleStatus::Failed => "FAILED",
+            };
+            let extra = if h.reason.is_empty() {
+                String::new()
+            } else {
+                format!("  ({})", h.reason)
+            };
+            println!(
+                "hole {:>4}  {:>6} verts  {:<6}  {:<16} {:<7}  +{}v +{}f  {:.1} ms{}",
+                h.id,
+                h.boundary_vertices,
+                h.class.name(),
+                method,
+                status,
+                h.added_vertices,
+                h.added_faces,
+                h.ms,
+                extra
+            );
+        }
+        let s = &report.summary;
+        println!(
+            "total: {} holes, {} filled, {} skipped, {} failed; {} -> {} faces",
+            s.holes, s.filled, s.skipped, s.failed, report.before.faces, report.after.faces
+        );
+    }
+    println!("FILL_TIME_S={:.6}", (report.timings.smooth_ms + report.timings.fill_ms) / 1000.0);
+
+    let t = Instant::now();
+    holefill::write(&args.output, &out, Some(out_format)).map_err(io_failure)?;
+    report.timings.write_ms = t.elapsed().as_secs_f64() * 1000.0;
+
+    if let Some(path) = &args.report {
+        write_report(path, &report.to_json())?;
+    }
+    Ok(if report.summary.failed > 0 {
+        exit::HOLES_FAILED
+    } else {
+        exit::OK
+    })
+}
+
+fn write_report(path: &Path, json: &str) -> Result<(), Failure> {
+    holefill::io::write_atomic(path, json.as_bytes()).map_err(io_failure)
+}

@@ -1,0 +1,538 @@
+//! The half-edge triangle mesh.
+//!
+//! Topology ([`Topology`]) is kept apart from geometry (positions, colours). The
+//! half-edges of a face are implicit: half-edge `3f + i` runs from corner `i` to
+//! corner `i + 1` of face `f`, so `next`/`prev` are arithmetic and only the twin
+//! (`Option`: `None` on a boundary) is stored. Every vertex has at most one fan of
+//! faces (non-manifold vertices are split by the builder), so each boundary vertex
+//! lies on exactly one boundary loop, once.
+//!
+//! Vertices are never renumbered: the vertices of the input keep their index, and
+//! vertices added by the builder (copies of split non-manifold vertices) or by hole
+//! filling are appended.
+
+mod build;
+mod ids;
+
+pub use build::BuildReport;
+pub use ids::{FaceId, HalfedgeId, VertexId};
+
+use glam::DVec3;
+use std::collections::HashMap;
+
+/// Connectivity only: faces, twins and one outgoing half-edge per vertex.
+#[derive(Clone, Debug, Default)]
+pub struct Topology {
+    faces: Vec<[VertexId; 3]>,
+    twin: Vec<Option<HalfedgeId>>,
+    /// For a boundary vertex: the outgoing half-edge whose twin is `None`, so that
+    /// walking [`Topology::next_outgoing`] from it visits the whole fan. `None` for an
+    /// isolated vertex.
+    anchor: Vec<Option<HalfedgeId>>,
+}
+
+impl Topology {
+    /// Number of vertices (including isolated ones).
+    pub fn num_vertices(&self) -> usize {
+        self.anchor.len()
+    }
+    /// Number of faces.
+    pub fn num_faces(&self) -> usize {
+        self.faces.len()
+    }
+    /// The three corners of a face, counter-clockwise seen from outside.
+    #[inline]
+    pub fn face(&self, f: FaceId) -> [VertexId; 3] {
+        self.faces[f.idx()]
+    }
+    /// All faces.
+    pub fn faces(&self) -> &[[VertexId; 3]] {
+        &self.faces
+    }
+    /// The vertex a half-edge starts at.
+    #[inline]
+    pub fn from(&self, h: HalfedgeId) -> VertexId {
+        self.faces[h.face().idx()][h.corner()]
+    }
+    /// The vertex a half-edge ends at.
+    #[inline]
+    pub fn to(&self, h: HalfedgeId) -> VertexId {
+        self.faces[h.face().idx()][(h.corner() + 1) % 3]
+    }
+    /// The opposite half-edge, `None` on a boundary.
+    #[inline]
+    pub fn twin(&self, h: HalfedgeId) -> Option<HalfedgeId> {
+        self.twin[h.0 as usize]
+    }
+    /// An outgoing half-edge of `v` (for a boundary vertex the one with no twin).
+    #[inline]
+    pub fn anchor(&self, v: VertexId) -> Option<HalfedgeId> {
+        self.anchor[v.idx()]
+    }
+    /// The next outgoing half-edge around `from(h)`, `None` at the boundary.
+    #[inline]
+    pub fn next_outgoing(&self, h: HalfedgeId) -> Option<HalfedgeId> {
+        self.twin(h.prev())
+    }
+    /// The previous outgoing half-edge around `from(h)`, `None` at the boundary.
+    #[inline]
+    pub fn prev_outgoing(&self, h: HalfedgeId) -> Option<HalfedgeId> {
+        self.twin(h).map(|t| t.next())
+    }
+    /// True when `v` has faces and lies on a boundary.
+    pub fn is_boundary_vertex(&self, v: VertexId) -> bool {
+        match self.anchor(v) {
+            Some(h) => self.twin(h).is_none(),
+            None => false,
+        }
+    }
+    /// The outgoing half-edges of `v`, in fan order (from the boundary, if any).
+    pub fn outgoing(&self, v: VertexId) -> Outgoing<'_> {
+        let start = self.anchor(v);
+        Outgoing {
+            topo: self,
+            start,
+            cur: start,
+            steps: 0,
+        }
+    }
+    /// The neighbours of `v`. For a boundary vertex the last fan face's far vertex
+    /// is included, so the list holds every adjacent vertex once.
+    pub fn neighbors(&self, v: VertexId) -> Vec<VertexId> {
+        let mut out = Vec::new();
+        let mut last = None;
+        for h in self.outgoing(v) {
+            out.push(self.to(h));
+            last = Some(h);
+        }
+        if let Some(h) = last {
+            if self.next_outgoing(h).is_none() {
+                out.push(self.from(h.prev()));
+            }
+        }
+        out
+    }
+    /// The faces around `v`, in fan order.
+    pub fn vertex_faces(&self, v: VertexId) -> impl Iterator<Item = FaceId> + '_ {
+        self.outgoing(v).map(|h| h.face())
+    }
+    /// The boundary half-edge (twin `None`) incoming to boundary vertex `v`.
+    pub fn incoming_boundary(&self, v: VertexId) -> Option<HalfedgeId> {
+        let mut last = None;
+        for h in self.outgoing(v) {
+            last = Some(h);
+        }
+        let h = last?;
+        let p = h.prev();
+        if self.twin(p).is_none() {
+            Some(p)
+        } else {
+            None
+        }
+    }
+    /// Every boundary loop, as the vertex sequence of the hole: consecutive vertices
+    /// `l[i] -> l[i+1]` run opposite to the existing face's half-edge, so a patch
+    /// triangle `(l[i], l[i+1], x)` is oriented like the surrounding surface.
+    pub fn boundary_loops(&self) -> Vec<Vec<VertexId>> {
+        let mut seen = vec![false; self.twin.len()];
+        let mut loops = Vec::new();
+        for (i, t) in self.twin.iter().enumerate() {
+            if t.is_some() || seen[i] {
+                continue;
+            }
+            // face half-edge a -> b; the hole runs b -> a -> ...
+            let start = HalfedgeId::from_idx(i);
+            let mut lp = vec![self.to(start)];
+            let mut h = start;
+            let mut guard = 0usize;
+            loop {
+                seen[h.0 as usize] = true;
+                let a = self.from(h);
+                lp.push(a);
+                match self.incoming_boundary(a) {
+                    Some(g) if g != start => h = g,
+                    _ => break,
+                }
+                guard += 1;
+                if guard > self.twin.len() {
+                    break;
+                }
+            }
+            // the loop closes on its first vertex: drop the repeat
+            if lp.len() > 1 && lp.first() == lp.last() {
+                lp.pop();
+            }
+            loops.push(lp);
+        }
+        loops
+    }
+
+    /// Appends faces and links their twins with each other and with the boundary.
+    ///
+    /// Fails, changing nothing, when a new directed edge already exists (the result
+    /// would not be an oriented manifold).
+    pub fn add_faces(&mut self, new: &[[VertexId; 3]], num_vertices: usize) -> Result<(), String> {
+        if self.anchor.len() < num_vertices {
+            self.anchor.resize(num_vertices, None);
+        }
+        let mut open: HashMap<(VertexId, VertexId), HalfedgeId> = HashMap::new();
+        let mut touched: Vec<VertexId> = Vec::new();
+        for f in new {
+            for &v in f {
+                touched.push(v);
+            }
+        }
+        touched.sort_unstable();
+        touched.dedup();
+        // existing directed edges around the touched vertices
+        let mut existing: HashMap<(VertexId, VertexId), HalfedgeId> = HashMap::new();
+        for &v in &touched {
+            if v.idx() >= self.anchor.len() {
+                return Err(format!("vertex {v} out of range"));
+            }
+            for h in self.outgoing(v) {
+                existing.insert((v, self.to(h)), h);
+                let p = h.prev();
+                existing.insert((self.from(p), v), p);
+            }
+        }
+        let base = self.faces.len() as u32;
+        for (fi, f) in new.iter().enumerate() {
+            if f[0] == f[1] || f[1] == f[2] || f[0] == f[2] {
+                return Err(format!("new face {fi} repeats a vertex"));
+            }
+            for c in 0..3 {
+                let key = (f[c], f[(c + 1) % 3]);
+                if existing.contains_key(&key) || open.contains_key(&key) {
+                    return Err(format!("directed edge {}->{} would be used twice", key.0, key.1));
+                }
+                open.insert(key, HalfedgeId((base + fi as u32) * 3 + c as u32));
+            }
+        }
+        let mut links: Vec<(HalfedgeId, HalfedgeId)> = Vec::new();
+        for (&(a, b), &h) in &open {
+            if let Some(&t) = open.get(&(b, a)) {
+                if h.0 < t.0 {
+                    links.push((h, t));
+                }
+            } else if let Some(&t) = existing.get(&(b, a)) {
+                if self.twin(t).is_some() {
+                    return Err(format!("edge {a}-{b} would get a third face"));
+                }
+                links.push((h, t));
+            }
+        }
+        self.faces.extend_from_slice(new);
+        self.twin.resize(self.faces.len() * 3, None);
+        for (h, t) in links {
+            self.twin[h.0 as usize] = Some(t);
+            self.twin[t.0 as usize] = Some(h);
+        }
+        for (fi, f) in new.iter().enumerate() {
+            for (c, &v) in f.iter().enumerate() {
+                if self.anchor[v.idx()].is_none() {
+                    self.anchor[v.idx()] = Some(HalfedgeId((base + fi as u32) * 3 + c as u32));
+                }
+            }
+        }
+        for v in touched {
+            self.reanchor(v);
+        }
+        Ok(())
+    }
+
+    /// Moves the anchor of `v` to the start of its fan (the boundary half-edge).
+    fn reanchor(&mut self, v: VertexId) {
+        let Some(start) = self.anchor[v.idx()] else {
+            return;
+        };
+        let mut h = start;
+        let mut guard = 0usize;
+        while let Some(p) = self.prev_outgoing(h) {
+            if p == start {
+                return; // interior vertex: any half-edge will do
+            }
+            h = p;
+            guard += 1;
+            if guard > self.twin.len() {
+                return;
+            }
+        }
+        self.anchor[v.idx()] = Some(h);
+    }
+
+    /// Checks every invariant; returns the first violation found.
+    pub fn validate(&self) -> Result<(), String> {
+        let nv = self.anchor.len();
+        if self.twin.len() != self.faces.len() * 3 {
+            return Err("twin array size".into());
+        }
+        let mut corners = vec![0u32; nv];
+        let mut directed = std::collections::HashSet::with_capacity(self.twin.len());
+        for (fi, f) in self.faces.iter().enumerate() {
+            for c in 0..3 {
+                if f[c].idx() >= nv {
+                    return Err(format!("face {fi} references vertex {} out of range", f[c]));
+                }
+                if f[c] == f[(c + 1) % 3] {
+                    return Err(format!("face {fi} repeats vertex {}", f[c]));
+                }
+                corners[f[c].idx()] += 1;
+                if !directed.insert((f[c], f[(c + 1) % 3])) {
+                    return Err(format!("directed edge {}->{} used twice", f[c], f[(c + 1) % 3]));
+                }
+            }
+        }
+        for (i, t) in self.twin.iter().enumerate() {
+            let h = HalfedgeId::from_idx(i);
+            if let Some(t) = *t {
+                if self.twin(t) != Some(h) {
+                    return Err(format!("twin of half-edge {i} is not symmetric"));
+                }
+                if self.from(t) != self.to(h) || self.to(t) != self.from(h) {
+                    return Err(format!("half-edge {i} and its twin do not share endpoints"));
+                }
+            } else if directed.contains(&(self.to(h), self.from(h))) {
+                return Err(format!(
+                    "boundary half-edge {i} ({}->{}) has an unlinked opposite",
+                    self.from(h),
+                    self.to(h)
+                ));
+            }
+        }
+        for (vi, &count) in corners.iter().enumerate() {
+            let v = VertexId::from_idx(vi);
+            match self.anchor[vi] {
+                None if count > 0 => return Err(format!("vertex {vi} has faces but no anchor")),
+                None => {}
+                Some(h) => {
+                    if self.from(h) != v {
+                        return Err(format!("anchor of vertex {vi} does not start at it"));
+                    }
+                    let n = self.outgoing(v).count() as u32;
+                    if n != count {
+                        return Err(format!(
+                            "vertex {vi} is non-manifold: fan has {n} of its {count} faces"
+                        ));
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Iterator over the outgoing half-edges of a vertex.
+pub struct Outgoing<'a> {
+    topo: &'a Topology,
+    start: Option<HalfedgeId>,
+    cur: Option<HalfedgeId>,
+    steps: usize,
+}
+
+impl Iterator for Outgoing<'_> {
+    type Item = HalfedgeId;
+    fn next(&mut self) -> Option<HalfedgeId> {
+        let h = self.cur?;
+        self.steps += 1;
+        let n = self.topo.next_outgoing(h);
+        self.cur = if n == self.start || self.steps > self.topo.twin.len() {
+            None
+        } else {
+            n
+        };
+        Some(h)
+    }
+}
+
+/// A triangle mesh: topology plus geometry.
+#[derive(Clone, Debug, Default)]
+pub struct Mesh {
+    /// Connectivity.
+    pub topo: Topology,
+    /// Vertex positions.
+    pub positions: Vec<DVec3>,
+    /// Per-vertex colours in `[0, 1]`, when the input had them.
+    pub colors: Option<Vec<[f32; 3]>>,
+    /// For each vertex the input vertex it stands for (itself, or the vertex a
+    /// non-manifold split copied), `None` for vertices added by filling.
+    pub origin: Vec<Option<VertexId>>,
+    /// Number of vertices in the input file.
+    pub input_vertices: usize,
+}
+
+impl Mesh {
+    /// Number of vertices.
+    pub fn num_vertices(&self) -> usize {
+        self.positions.len()
+    }
+    /// Number of faces.
+    pub fn num_faces(&self) -> usize {
+        self.topo.num_faces()
+    }
+    /// Position of a vertex.
+    #[inline]
+    pub fn pos(&self, v: VertexId) -> DVec3 {
+        self.positions[v.idx()]
+    }
+    /// The corner positions of a face.
+    #[inline]
+    pub fn tri(&self, f: FaceId) -> [DVec3; 3] {
+        let [a, b, c] = self.topo.face(f);
+        [self.pos(a), self.pos(b), self.pos(c)]
+    }
+    /// Unnormalised face normal (twice the area vector).
+    pub fn face_normal_raw(&self, f: FaceId) -> DVec3 {
+        let [a, b, c] = self.tri(f);
+        (b - a).cross(c - a)
+    }
+    /// Area-weighted vertex normal (unit, or zero when undefined).
+    pub fn vertex_normal(&self, v: VertexId) -> DVec3 {
+        let mut n = DVec3::ZERO;
+        for f in self.topo.vertex_faces(v) {
+            n += self.face_normal_raw(f);
+        }
+        n.normalize_or_zero()
+    }
+    /// Axis-aligned bounding box (min, max) of all vertices.
+    pub fn bbox(&self) -> (DVec3, DVec3) {
+        let mut lo = DVec3::splat(f64::INFINITY);
+        let mut hi = DVec3::splat(f64::NEG_INFINITY);
+        for p in &self.positions {
+            lo = lo.min(*p);
+            hi = hi.max(*p);
+        }
+        if self.positions.is_empty() {
+            (DVec3::ZERO, DVec3::ZERO)
+        } else {
+            (lo, hi)
+        }
+    }
+    /// Length of the bounding-box diagonal.
+    pub fn bbox_diagonal(&self) -> f64 {
+        let (lo, hi) = self.bbox();
+        (hi - lo).length()
+    }
+    /// Mean length of the edges incident to `v`.
+    pub fn mean_incident_edge_length(&self, v: VertexId) -> f64 {
+        let nb = self.topo.neighbors(v);
+        if nb.is_empty() {
+            return 0.0;
+        }
+        let p = self.pos(v);
+        nb.iter().map(|&w| (self.pos(w) - p).length()).sum::<f64>() / nb.len() as f64
+    }
+    /// Appends a vertex (added by filling) and returns its id.
+    pub fn add_vertex(&mut self, p: DVec3, color: Option<[f32; 3]>) -> VertexId {
+        let id = VertexId::from_idx(self.positions.len());
+        self.positions.push(p);
+        if let Some(c) = self.colors.as_mut() {
+            c.push(color.unwrap_or([0.5, 0.5, 0.5]));
+        }
+        self.origin.push(None);
+        id
+    }
+    /// Appends faces over existing vertices (see [`Topology::add_faces`]).
+    pub fn add_faces(&mut self, faces: &[[VertexId; 3]]) -> Result<(), String> {
+        let n = self.positions.len();
+        self.topo.add_faces(faces, n)
+    }
+    /// Removes the last `n` vertices (used to undo a rejected patch's vertices,
+    /// which no face references).
+    pub fn truncate_vertices(&mut self, n: usize) {
+        self.positions.truncate(n);
+        self.origin.truncate(n);
+        if let Some(c) = self.colors.as_mut() {
+            c.truncate(n);
+        }
+        self.topo.anchor.truncate(n);
+    }
+    /// Checks topology invariants and that geometry arrays match it.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.positions.len() != self.topo.num_vertices() {
+            return Err(format!(
+                "{} positions for {} vertices",
+                self.positions.len(),
+                self.topo.num_vertices()
+            ));
+        }
+        if self.origin.len() != self.positions.len() {
+            return Err("origin array size".into());
+        }
+        if let Some(c) = &self.colors {
+            if c.len() != self.positions.len() {
+                return Err("colour array size".into());
+            }
+        }
+        if let Some(i) = self.positions.iter().position(|p| !p.is_finite()) {
+            return Err(format!("vertex {i} has a non-finite coordinate"));
+        }
+        self.topo.validate()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::RawMesh;
+
+    pub(crate) fn grid(n: usize) -> RawMesh {
+        let mut raw = RawMesh::default();
+        for j in 0..=n {
+            for i in 0..=n {
+                raw.positions.push(DVec3::new(i as f64, j as f64, 0.0));
+            }
+        }
+        let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
+        for j in 0..n {
+            for i in 0..n {
+                raw.faces.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+                raw.faces.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+        raw
+    }
+
+    #[test]
+    fn grid_has_one_boundary_loop() {
+        let (m, rep) = Mesh::from_raw(&grid(4));
+        m.validate().unwrap();
+        assert_eq!(rep.flipped_faces, 0);
+        let loops = m.topo.boundary_loops();
+        assert_eq!(loops.len(), 1);
+        assert_eq!(loops[0].len(), 16);
+        // the hole runs opposite to the faces: for an upward grid it is clockwise
+        let l = &loops[0];
+        let mut area = 0.0;
+        for i in 0..l.len() {
+            let a = m.pos(l[i]);
+            let b = m.pos(l[(i + 1) % l.len()]);
+            area += a.x * b.y - b.x * a.y;
+        }
+        assert!(area < 0.0);
+    }
+
+    #[test]
+    fn fill_a_hole_by_adding_faces() {
+        let mut raw = grid(4);
+        // remove the two faces of the cell (1,1)
+        let n = 4;
+        let cell = 1 * n + 1;
+        raw.faces.remove(2 * cell + 1);
+        raw.faces.remove(2 * cell);
+        let (mut m, _) = Mesh::from_raw(&raw);
+        m.validate().unwrap();
+        let loops = m.topo.boundary_loops();
+        assert_eq!(loops.len(), 2);
+        let hole = loops.iter().find(|l| l.len() == 4).unwrap().clone();
+        m.add_faces(&[[hole[0], hole[1], hole[2]], [hole[0], hole[2], hole[3]]])
+            .unwrap();
+        m.validate().unwrap();
+        assert_eq!(m.topo.boundary_loops().len(), 1);
+        // adding the same faces again must fail and change nothing
+        let before = m.num_faces();
+        assert!(m.add_faces(&[[hole[0], hole[1], hole[2]]]).is_err());
+        assert_eq!(m.num_faces(), before);
+        m.validate().unwrap();
+    }
+}

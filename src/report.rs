@@ -1,0 +1,203 @@
+//! The per-file repair log (serialised as JSON by `holefill fill --report` and by the
+//! daemon). The schema is documented in README.md ("Repair log").
+
+use crate::io::Format;
+use crate::mesh::BuildReport;
+use crate::policy::{Method, Policy};
+use serde::Serialize;
+
+/// Size class of a hole.
+#[derive(Clone, Copy, Debug, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum HoleClass {
+    Small,
+    Middle,
+    Large,
+}
+
+impl HoleClass {
+    /// The lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            HoleClass::Small => "small",
+            HoleClass::Middle => "middle",
+            HoleClass::Large => "large",
+        }
+    }
+}
+
+/// How a hole ended.
+#[derive(Clone, Copy, Debug, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum HoleStatus {
+    Filled,
+    Skipped,
+    Failed,
+}
+
+/// How one method attempt on one hole ended.
+#[derive(Clone, Copy, Debug, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum Outcome {
+    /// The patch passed the checks and is in the mesh.
+    Accepted,
+    /// The method produced a patch that failed a check; it was undone.
+    Rejected,
+    /// The method could not produce a patch.
+    Error,
+    /// The per-hole time limit ran out.
+    Timeout,
+}
+
+/// One method attempt.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct Attempt {
+    pub method: Method,
+    pub outcome: Outcome,
+    /// Why it was rejected or failed (empty when accepted).
+    pub reason: String,
+    pub ms: f64,
+}
+
+/// Quality of the triangles a patch added.
+#[derive(Clone, Debug, Serialize, PartialEq, Default)]
+pub struct PatchQuality {
+    /// Share (0..1) of patch triangles with shortest edge / circumradius > 1.39.
+    pub q_good_share: f64,
+    /// Smallest angle of any patch triangle, degrees.
+    pub min_angle_deg: f64,
+    /// Share (0..1) of new interior vertices with valence 6 (`null` without new vertices).
+    pub valence6_share: Option<f64>,
+}
+
+/// One hole.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct HoleReport {
+    pub id: usize,
+    pub boundary_vertices: usize,
+    pub perimeter: f64,
+    pub mean_edge_length: f64,
+    pub class: HoleClass,
+    /// The method whose patch was accepted.
+    pub method: Option<Method>,
+    pub tried: Vec<Attempt>,
+    pub status: HoleStatus,
+    /// Why it was skipped or failed (empty when filled).
+    pub reason: String,
+    pub added_vertices: usize,
+    pub added_faces: usize,
+    pub quality: Option<PatchQuality>,
+    pub ms: f64,
+}
+
+/// Vertex, face and hole counts.
+#[derive(Clone, Debug, Serialize, PartialEq, Default)]
+pub struct Counts {
+    pub vertices: usize,
+    pub faces: usize,
+    pub boundary_loops: usize,
+}
+
+/// What was resolved in the input before filling.
+#[derive(Clone, Debug, Serialize, PartialEq, Default)]
+pub struct Resolved {
+    /// What the reader did (polygons fanned, STL vertices welded, ...).
+    pub reader: Vec<String>,
+    /// What the mesh builder resolved.
+    pub mesh: BuildReport,
+    /// Tooth faces removed by boundary cleaning.
+    pub tooth_faces_removed: usize,
+    /// Long boundary edges split by boundary cleaning.
+    pub long_edges_split: usize,
+    /// Degenerate boundary loops (fewer than 3 vertices) that cannot be filled.
+    pub degenerate_loops: usize,
+}
+
+/// Durations in milliseconds.
+#[derive(Clone, Debug, Serialize, PartialEq, Default)]
+pub struct Timings {
+    pub read_ms: f64,
+    pub smooth_ms: f64,
+    pub fill_ms: f64,
+    pub write_ms: f64,
+}
+
+/// A file path with its format.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct FileRef {
+    pub path: String,
+    pub format: Format,
+}
+
+/// Hole totals.
+#[derive(Clone, Debug, Serialize, PartialEq, Default)]
+pub struct Summary {
+    pub holes: usize,
+    pub filled: usize,
+    pub skipped: usize,
+    pub failed: usize,
+}
+
+/// The whole repair log of one file.
+#[derive(Clone, Debug, Serialize)]
+pub struct RepairReport {
+    pub holefill_version: &'static str,
+    pub input: Option<FileRef>,
+    pub output: Option<FileRef>,
+    pub before: Counts,
+    pub after: Counts,
+    pub resolved: Resolved,
+    pub smoothing: Option<SmoothingReport>,
+    pub policy: Policy,
+    pub timings: Timings,
+    pub summary: Summary,
+    pub holes: Vec<HoleReport>,
+}
+
+/// What smoothing did.
+#[derive(Clone, Debug, Serialize, PartialEq, Default)]
+pub struct SmoothingReport {
+    pub iterations: usize,
+    pub vertices_moved: usize,
+    pub max_displacement: f64,
+}
+
+impl RepairReport {
+    /// An empty log for a policy.
+    pub fn new(policy: &Policy) -> RepairReport {
+        RepairReport {
+            holefill_version: env!("CARGO_PKG_VERSION"),
+            input: None,
+            output: None,
+            before: Counts::default(),
+            after: Counts::default(),
+            resolved: Resolved::default(),
+            smoothing: None,
+            policy: policy.clone(),
+            timings: Timings::default(),
+            summary: Summary::default(),
+            holes: Vec::new(),
+        }
+    }
+
+    /// Recomputes the summary from the holes.
+    pub fn summarise(&mut self) {
+        let mut s = Summary {
+            holes: self.holes.len(),
+            ..Default::default()
+        };
+        for h in &self.holes {
+            match h.status {
+                HoleStatus::Filled => s.filled += 1,
+                HoleStatus::Skipped => s.skipped += 1,
+                HoleStatus::Failed => s.failed += 1,
+            }
+        }
+        self.summary = s;
+    }
+
+    /// The log as pretty JSON.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"))
+    }
+}
