@@ -1,0 +1,176 @@
+//! `holefill fill` end to end, on holes cut from analytic surfaces (the oracle).
+
+mod common;
+use common::*;
+
+fn radius(p: V3) -> f64 {
+    (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt()
+}
+
+/// Cuts holes of every size class out of a unit icosphere.
+fn holed_sphere() -> (Soup, usize) {
+    let s = icosphere(4); // 5120 faces, edge about 0.066
+    let (s, _) = cut(&s, [0.0, 0.0, 1.0], 0.09); // small
+    let (s, _) = cut(&s, [1.0, 0.0, 0.0], 0.25); // middle
+    let (s, _) = cut(&s, [0.0, -0.6, -0.8], 0.55); // large
+    (s, 3)
+}
+
+#[test]
+fn sphere_holes_are_closed_on_the_sphere_and_input_is_bit_exact() {
+    let dir = tempdir();
+    let (s, nholes) = holed_sphere();
+    assert_eq!(s.f.len() > 4000, true);
+    let inp = dir.path().join("sphere.obj");
+    let out = dir.path().join("out.obj");
+    let rep = dir.path().join("sphere.repair.json");
+    write_obj(&inp, &s);
+    assert!(boundary_edges(&s) > 0);
+    let o = run(&[
+        "fill",
+        inp.to_str().unwrap(),
+        out.to_str().unwrap(),
+        "--report",
+        rep.to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(0), "stdout: {stdout}\nstderr: {}", String::from_utf8_lossy(&o.stderr));
+    assert!(stdout.contains("FILL_TIME_S="), "{stdout}");
+    assert_eq!(stdout.lines().filter(|l| l.starts_with("hole")).count(), nholes, "{stdout}");
+
+    let r = read_obj(&out);
+    assert_eq!(boundary_edges(&r), 0, "output still has holes");
+    // input vertices first, unchanged, bit for bit
+    for (i, p) in s.v.iter().enumerate() {
+        assert_eq!(r.v[i].map(f64::to_bits), p.map(f64::to_bits), "vertex {i} moved");
+    }
+    // input faces kept
+    for (i, f) in s.f.iter().enumerate() {
+        assert_eq!(r.f[i], *f, "face {i} changed");
+    }
+    // new vertices on the sphere (bound: 1 % of the radius at worst, 0.3 % mean)
+    let new: Vec<f64> = r.v[s.v.len()..].iter().map(|&p| (radius(p) - 1.0).abs()).collect();
+    assert!(!new.is_empty());
+    let max = new.iter().cloned().fold(0.0, f64::max);
+    let mean = new.iter().sum::<f64>() / new.len() as f64;
+    assert!(max < 0.01, "max radial error {max}");
+    assert!(mean < 0.003, "mean radial error {mean}");
+
+    let log: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+    let holes = log["holes"].as_array().unwrap();
+    assert_eq!(holes.len(), nholes);
+    let classes: Vec<&str> = holes.iter().map(|h| h["class"].as_str().unwrap()).collect();
+    for c in ["small", "middle", "large"] {
+        assert!(classes.contains(&c), "no {c} hole in {classes:?}");
+    }
+    for h in holes {
+        assert_eq!(h["status"], "filled", "{h}");
+        assert!(h["method"].is_string());
+        assert!(h["tried"].as_array().unwrap().iter().any(|a| a["outcome"] == "accepted"));
+        assert!(h["quality"]["q_good_share"].as_f64().unwrap() > 0.0);
+    }
+    assert_eq!(log["summary"]["filled"], nholes);
+    assert_eq!(log["input"]["format"], "obj");
+    assert!(log["timings"]["fill_ms"].is_number());
+}
+
+#[test]
+fn torus_hole_stays_on_the_torus() {
+    let dir = tempdir();
+    let t = torus(2.0, 0.7, 64, 24);
+    let (s, gt) = cut(&t, [2.7, 0.0, 0.0], 0.6);
+    assert!(gt.f.len() > 10);
+    let inp = dir.path().join("torus.obj");
+    let out = dir.path().join("torus.out.obj");
+    write_obj(&inp, &s);
+    let o = run(&["fill", inp.to_str().unwrap(), out.to_str().unwrap(), "-q"]);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let r = read_obj(&out);
+    assert_eq!(boundary_edges(&r), 0);
+    let errs: Vec<f64> = r.v[s.v.len()..].iter().map(|&p| torus_distance(p, 2.0, 0.7)).collect();
+    let mean = errs.iter().sum::<f64>() / errs.len().max(1) as f64;
+    // bound: 2 % of the minor radius on average
+    assert!(mean < 0.014, "mean distance to the torus {mean}");
+}
+
+#[test]
+fn malformed_input_exits_65_and_writes_nothing() {
+    let dir = tempdir();
+    let inp = dir.path().join("bad.obj");
+    std::fs::write(&inp, "v 0 0 0\nv 1 0 0\nf 1 2 7\n").unwrap();
+    let out = dir.path().join("out.obj");
+    let o = run(&["fill", inp.to_str().unwrap(), out.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(65));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("bad.obj"), "{err}");
+    assert!(!out.exists());
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1, "something was left behind");
+}
+
+#[test]
+fn invalid_policy_exits_78() {
+    let dir = tempdir();
+    let (s, _) = holed_sphere();
+    let inp = dir.path().join("s.obj");
+    write_obj(&inp, &s);
+    let pol = dir.path().join("p.toml");
+    std::fs::write(&pol, "[dispatch]\nsmall = [\"nope\"]\n").unwrap();
+    let out = dir.path().join("o.obj");
+    let o = run(&["fill", inp.to_str().unwrap(), out.to_str().unwrap(), "--policy", pol.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(78));
+    assert!(!out.exists());
+}
+
+#[test]
+fn unwritable_output_exits_74_and_leaves_nothing() {
+    let dir = tempdir();
+    let (s, _) = holed_sphere();
+    let inp = dir.path().join("s.obj");
+    write_obj(&inp, &s);
+    let out = dir.path().join("no/such/folder/o.obj");
+    let o = run(&["fill", inp.to_str().unwrap(), out.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(74), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+#[test]
+fn failed_holes_exit_2_with_output_written_and_reasons_logged() {
+    let dir = tempdir();
+    let (s, _) = holed_sphere();
+    let inp = dir.path().join("s.obj");
+    write_obj(&inp, &s);
+    // an impossible minimum angle makes every patch fail its checks
+    let pol = dir.path().join("p.toml");
+    std::fs::write(&pol, "[checks]\nmin_angle_deg = 29.9\n").unwrap();
+    let out = dir.path().join("o.obj");
+    let rep = dir.path().join("o.json");
+    let o = run(&[
+        "fill",
+        inp.to_str().unwrap(),
+        out.to_str().unwrap(),
+        "--policy",
+        pol.to_str().unwrap(),
+        "--report",
+        rep.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stdout));
+    assert!(out.exists());
+    let log: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+    let failed: Vec<_> = log["holes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|h| h["status"] == "failed")
+        .collect();
+    assert!(!failed.is_empty());
+    for h in failed {
+        assert!(h["reason"].as_str().unwrap().contains("smallest angle"), "{h}");
+        assert!(h["tried"].as_array().unwrap().len() >= 2, "{h}");
+    }
+}
+
+#[test]
+fn check_policy_accepts_the_shipped_policy() {
+    let p = concat!(env!("CARGO_MANIFEST_DIR"), "/config/policy.toml");
+    let o = run(&["check-policy", p]);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+}
