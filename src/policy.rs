@@ -421,6 +421,8 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
     ),
 ];
 
+/// Largest policy file [`Policy::from_file`] reads (1 MiB; the default file is about 7 KB).
+pub const MAX_POLICY_BYTES: u64 = 1 << 20;
 /// Largest `refine.restricted_search_above`: the full search takes O(k^2) memory.
 pub const MAX_FULL_SEARCH: usize = 2000;
 /// Largest `limits.hole_time_ms` (one day).
@@ -478,25 +480,32 @@ impl Invalid {
 }
 
 impl Policy {
-    /// Reads and validates a policy file.
+    /// Reads and validates a policy file (at most [`MAX_POLICY_BYTES`]).
     pub fn from_file(path: &Path) -> Result<Policy, PolicyError> {
-        let text = std::fs::read_to_string(path).map_err(|e| PolicyError {
+        use std::io::Read;
+        let error = |message: String| PolicyError {
             file: path.to_path_buf(),
             line: None,
             key: None,
-            message: format!("cannot read the policy: {e}"),
-        })?;
+            message,
+        };
+        let file =
+            std::fs::File::open(path).map_err(|e| error(format!("cannot read the policy: {e}")))?;
+        let mut text = String::new();
+        file.take(MAX_POLICY_BYTES + 1)
+            .read_to_string(&mut text)
+            .map_err(|e| error(format!("cannot read the policy: {e}")))?;
+        if text.len() as u64 > MAX_POLICY_BYTES {
+            return Err(error(format!(
+                "larger than {MAX_POLICY_BYTES} bytes; this is not a policy file"
+            )));
+        }
         Policy::from_toml_str(&text, path)
     }
 
     /// Parses and validates policy text; `path` names it in errors.
     pub fn from_toml_str(text: &str, path: &Path) -> Result<Policy, PolicyError> {
-        let root = DeTable::parse(text).map_err(|e| PolicyError {
-            file: path.to_path_buf(),
-            line: e.span().map(|s| line_of(text, s.start)),
-            key: None,
-            message: e.message().trim().to_string(),
-        })?;
+        let root = DeTable::parse(text).map_err(|e| syntax_error(text, path, &e))?;
         let mut reader = Reader {
             text,
             file: path,
@@ -764,6 +773,40 @@ fn open(key: &'static str, x: f64, lo: f64, hi: f64) -> Result<(), Invalid> {
     Err(Invalid::new(key, message))
 }
 
+/// A TOML syntax error with its line, column and, for a duplicate key, the key.
+fn syntax_error(text: &str, path: &Path, e: &toml::de::Error) -> PolicyError {
+    let mut message = format!("TOML syntax error: {}", e.message().trim());
+    let mut line = None;
+    if let Some(span) = e.span() {
+        let start = span.start.min(text.len());
+        line = Some(line_of(text, start));
+        let snippet = text.get(start..span.end.min(text.len())).unwrap_or("");
+        if e.message().trim() == "duplicate key" && !snippet.is_empty() && !snippet.contains('\n') {
+            message = format!(
+                "`{snippet}` appears twice (each key and each [table] may be set only once)"
+            );
+        } else {
+            let line_start = text.as_bytes()[..start]
+                .iter()
+                .rposition(|&b| b == b'\n')
+                .map_or(0, |i| i + 1);
+            let column = text
+                .get(line_start..start)
+                .map_or(1, |s| s.chars().count() + 1);
+            message = format!(
+                "TOML syntax error at column {column}: {}",
+                e.message().trim()
+            );
+        }
+    }
+    PolicyError {
+        file: path.to_path_buf(),
+        line,
+        key: None,
+        message,
+    }
+}
+
 /// 1-based line of a byte offset.
 fn line_of(text: &str, offset: usize) -> usize {
     let end = offset.min(text.len());
@@ -826,7 +869,7 @@ pub fn edit_distance(a: &str, b: &str) -> usize {
 
 /// The valid name closest to `typed` (case, `-` and spaces ignored), when it is close
 /// enough to be a misspelling: at most a third of the typed length in edits (at least
-/// 1), or an abbreviation (the typed text, 3 characters or more, starts the name).
+/// 1), or a part of the name (3 characters or more, e.g. `time_ms` for `hole_time_ms`).
 pub fn did_you_mean<'c>(typed: &str, candidates: &[&'c str]) -> Option<&'c str> {
     let norm = |s: &str| s.trim().to_lowercase().replace(['-', ' '], "_");
     let t = norm(typed);
@@ -836,11 +879,30 @@ pub fn did_you_mean<'c>(typed: &str, candidates: &[&'c str]) -> Option<&'c str> 
         .iter()
         .map(|&c| {
             let n = norm(c);
-            (edit_distance(&t, &n), len >= 3 && n.starts_with(&t), c)
+            (edit_distance(&t, &n), len >= 3 && n.contains(&t), c)
         })
-        .filter(|&(d, prefix, _)| d <= limit || prefix)
+        .filter(|&(d, part, _)| d <= limit || part)
         .min_by_key(|&(d, _, _)| d)
         .map(|(_, _, c)| c)
+}
+
+/// The sections that have a key of this name, if any.
+fn sections_with_key(name: &str) -> Option<Vec<&'static str>> {
+    let found: Vec<&str> = SECTIONS
+        .iter()
+        .filter(|(_, keys)| keys.contains(&name))
+        .map(|(s, _)| *s)
+        .collect();
+    (!found.is_empty()).then_some(found)
+}
+
+/// `[a]`, `[a] or [b]`.
+fn sections_list(sections: &[&str]) -> String {
+    sections
+        .iter()
+        .map(|s| format!("[{s}]"))
+        .collect::<Vec<_>>()
+        .join(" or ")
 }
 
 /// Stage 1: the spanned TOML tree read into a [`Policy`] (types checked, ranges not),
@@ -977,8 +1039,16 @@ impl Reader<'_> {
             } else {
                 format!("did you mean `{s}`?")
             }
-        } else if let Some((s, _)) = SECTIONS.iter().find(|(_, keys)| keys.contains(&name)) {
-            format!("`{name}` belongs in [{s}]: write it under [{s}] or as `{s}.{name}`")
+        } else if let Some(s) = sections_with_key(name) {
+            let dotted = s
+                .iter()
+                .map(|s| format!("`{s}.{name}`"))
+                .collect::<Vec<_>>()
+                .join(" or ");
+            format!(
+                "`{name}` belongs in {}: write it under the section or as {dotted}",
+                sections_list(&s)
+            )
         } else {
             format!(
                 "the top level has `{}` and the sections [{}]",
@@ -1000,8 +1070,8 @@ impl Reader<'_> {
             format!("did you mean `{s}`?")
         } else if TOP_LEVEL_KEYS.contains(&name) {
             format!("`{name}` belongs at the top level, before any [section]")
-        } else if let Some((s, _)) = SECTIONS.iter().find(|(_, ks)| ks.contains(&name)) {
-            format!("`{name}` belongs in [{s}], not [{section}]")
+        } else if let Some(s) = sections_with_key(name) {
+            format!("`{name}` belongs in {}, not [{section}]", sections_list(&s))
         } else {
             format!("[{section}] has `{}`", keys.join("`, `"))
         };
@@ -1010,8 +1080,9 @@ impl Reader<'_> {
 
     fn int(&self, key: &str, v: &Spanned<DeValue>) -> Result<i64, PolicyError> {
         match v.get_ref() {
-            DeValue::Integer(i) => i64::from_str_radix(i.as_str(), i.radix())
-                .map_err(|_| self.error(v.span(), key, format!("integer {i} is out of range"))),
+            DeValue::Integer(i) => i64::from_str_radix(i.as_str(), i.radix()).map_err(|_| {
+                self.error(v.span(), key, format!("integer {i} is too large for TOML"))
+            }),
             _ => Err(self.type_error(key, v, "an integer")),
         }
     }
@@ -1238,6 +1309,19 @@ mod tests {
         );
         let e = err("[smooth]\nseed = 3\n");
         assert!(e.message.contains("belongs at the top level"), "{e}");
+        let e = err("[front]\nweights = \"uniform\"\n");
+        assert_eq!(
+            e.message,
+            "unknown key; `weights` belongs in [fair] or [smooth], not [front]"
+        );
+        let e = err("[limits]\ntime_ms = 5\n");
+        assert_eq!(e.message, "unknown key; did you mean `hole_time_ms`?");
+        let e = err("weights = \"uniform\"\n");
+        assert_eq!(
+            e.message,
+            "unknown key; `weights` belongs in [fair] or [smooth]: write it under the section \
+             or as `fair.weights` or `smooth.weights`"
+        );
         let e = err("small_max = 3\n");
         assert_eq!(e.key.as_deref(), Some("small_max"));
         assert!(e.message.contains("belongs in [dispatch]"), "{e}");
@@ -1340,9 +1424,25 @@ mod tests {
         let e = err("seed = 1\n[dispatch\nsmall_max = 3\n");
         assert_eq!(e.line, Some(2));
         assert_eq!(e.key, None);
+        assert_eq!(
+            e.message,
+            "TOML syntax error at column 10: unclosed table, expected `]`"
+        );
         let e = err("[front]\nalpha = 0.5\nalpha = 0.6\n");
         assert_eq!(e.line, Some(3));
-        assert!(e.message.contains("duplicate"), "{e}");
+        assert_eq!(
+            e.message,
+            "`alpha` appears twice (each key and each [table] may be set only once)"
+        );
+        let e = err("[front]\nalpha = 0.5\n\n[front]\n");
+        assert_eq!(e.line, Some(4));
+        assert!(e.message.starts_with("`front` appears twice"), "{e}");
+        let e = err("seed = \"abc\n");
+        assert_eq!(e.line, Some(1));
+        assert!(
+            e.message.starts_with("TOML syntax error at column 12"),
+            "{e}"
+        );
     }
 
     #[test]
@@ -1480,6 +1580,10 @@ mod tests {
         let bad = dir.path().join("bad.toml");
         std::fs::write(&bad, [0xff, 0xfe, b'\n']).unwrap();
         assert!(Policy::from_file(&bad).is_err());
+        let big = dir.path().join("big.toml");
+        std::fs::write(&big, "# padding\n".repeat(200_000)).unwrap();
+        let e = Policy::from_file(&big).unwrap_err();
+        assert!(e.message.starts_with("larger than 1048576 bytes"), "{e}");
         let good = dir.path().join("good.toml");
         std::fs::write(&good, "[smooth]\nenabled = true\n").unwrap();
         assert!(Policy::from_file(&good).unwrap().smooth.enabled);
