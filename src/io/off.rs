@@ -137,8 +137,10 @@ pub(crate) fn read<R: BufRead>(path: &Path, reader: R, len: u64) -> Result<RawMe
             "{nv} vertices / {nf} faces exceed the limit of {MAX_ELEMENTS}"
         )));
     }
-    // Shortest vertex line "0 0 0\n", shortest face line "3 0 0 0\n".
-    if u128::from(nv) * 6 + u128::from(nf) * 8 > u128::from(remaining) {
+    // Shortest vertex line "0 0 0\n", shortest face line "3 0 0 0\n" (the last
+    // line may lack its newline).
+    let need = (u128::from(nv) * 6 + u128::from(nf) * 8).saturating_sub(1);
+    if need > u128::from(remaining) {
         return Err(bad_counts(format!(
             "the header claims {nv} vertices and {nf} faces, but only {remaining} bytes follow"
         )));

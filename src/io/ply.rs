@@ -146,7 +146,9 @@ pub(crate) fn read<R: BufRead>(path: &Path, reader: R, len: u64) -> Result<RawMe
             *slot = Some(k);
         }
         need += u128::from(el.count) * u128::from(el.min_size(encoding));
-        if need > u128::from(remaining) {
+        // The last ASCII value needs no separator.
+        let slack = u128::from(encoding == Encoding::Ascii);
+        if need.saturating_sub(slack) > u128::from(remaining) {
             return Err(bad(format!(
                 "the header claims {} '{}' elements, but only {remaining} bytes follow the header",
                 el.count, el.name
