@@ -10,7 +10,7 @@
 //! `g`, `s`, `usemtl`, `mtllib`, `l`, `p` and unknown records, and fans polygons.
 
 use super::text::{has_nul, parse_coord, parse_f64, parse_i64, show, strip_comment, tokens};
-use super::text::{Lines, Next};
+use super::text::{Lines, Next, MAX_LINE};
 use super::{io_error, malformed, IoError, Precision, RawMesh, MAX_ELEMENTS};
 use glam::DVec3;
 use std::io::{BufRead, Write};
@@ -33,7 +33,7 @@ pub(crate) fn read<R: BufRead>(path: &Path, reader: R) -> Result<RawMesh, IoErro
     let mut forward: Option<(u64, usize)> = None;
 
     loop {
-        let (ln, line) = match lines.next_line(None).map_err(|e| io_error(path, e))? {
+        let (ln, line) = match lines.next_line(MAX_LINE).map_err(|e| io_error(path, e))? {
             Next::Line(ln, l) => (ln, l),
             Next::Eof => break,
             Next::TooLong(ln) => return Err(malformed(path, Some(ln), "line too long")),

@@ -9,7 +9,7 @@
 //! are ignored.
 
 use super::text::{has_nul, parse_coord, parse_f64, parse_i64, show, strip_comment, tokens};
-use super::text::{Lines, Next};
+use super::text::{Lines, Next, MAX_LINE};
 use super::{color_byte, io_error, malformed, IoError, Precision, RawMesh, MAX_ELEMENTS};
 use glam::DVec3;
 use std::io::{BufRead, Write};
@@ -22,7 +22,7 @@ fn content_line<'a, R: BufRead>(
 ) -> Result<Option<(usize, &'a [u8])>, IoError> {
     loop {
         // Re-borrow per iteration: the returned slice must come from the last call.
-        let skip = match lines.next_line(None).map_err(|e| io_error(path, e))? {
+        let skip = match lines.next_line(MAX_LINE).map_err(|e| io_error(path, e))? {
             Next::Eof => return Ok(None),
             Next::TooLong(ln) => return Err(malformed(path, Some(ln), "line too long")),
             Next::Line(ln, l) => {

@@ -7,7 +7,8 @@
 //! are fanned. The header's counts are checked against the bytes that follow it
 //! before anything is allocated.
 
-use super::text::{has_nul, parse_coord, parse_f64, parse_i64, show, tokens, Lines, Next};
+use super::text::{has_nul, parse_coord, parse_coord_f32, parse_f64, parse_i64, show, tokens};
+use super::text::{Lines, Next, MAX_LINE};
 use super::{color_byte, MAX_ELEMENTS};
 use super::{io_error, malformed, read_error, Encoding, IoError, Precision, RawMesh};
 use glam::DVec3;
@@ -327,7 +328,7 @@ fn read_header<R: BufRead>(
     let mut first = true;
     loop {
         let (ln, line) = match lines
-            .next_line(Some(MAX_HEADER_LINE))
+            .next_line(MAX_HEADER_LINE)
             .map_err(|e| io_error(path, e))?
         {
             Next::Line(ln, l) => (ln, l),
@@ -494,7 +495,10 @@ impl<R: BufRead> Body<'_, R> {
         } = &mut self.src
         {
             loop {
-                match lines.next_line(None).map_err(|e| io_error(self.path, e))? {
+                match lines
+                    .next_line(MAX_LINE)
+                    .map_err(|e| io_error(self.path, e))?
+                {
                     Next::Line(ln, l) => {
                         if l.trim_ascii().is_empty() {
                             continue;
@@ -586,8 +590,15 @@ impl<R: BufRead> Body<'_, R> {
         let v = match self.bin(t) {
             Some(res) => res.map_err(|e| self.bin_err(e))?,
             None => {
+                // A value declared `float` is an f32: rounded once from the text.
                 let r = self.token()?;
-                return parse_coord(self.tok_bytes(r)).map_err(|m| self.err(m));
+                let tok = self.tok_bytes(r);
+                let v = if t == Scalar::F32 {
+                    parse_coord_f32(tok)
+                } else {
+                    parse_coord(tok)
+                };
+                return v.map_err(|m| self.err(m));
             }
         };
         if v.is_finite() {
@@ -671,7 +682,10 @@ impl<R: BufRead> Body<'_, R> {
                 Ok(!r.fill_buf().map_err(|e| io_error(self.path, e))?.is_empty())
             }
             Src::Ascii { lines, .. } => loop {
-                match lines.next_line(None).map_err(|e| io_error(self.path, e))? {
+                match lines
+                    .next_line(MAX_LINE)
+                    .map_err(|e| io_error(self.path, e))?
+                {
                     Next::Line(_, l) if l.trim_ascii().is_empty() => continue,
                     Next::Eof => return Ok(false),
                     _ => return Ok(true),

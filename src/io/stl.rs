@@ -10,7 +10,7 @@
 //! Facet normals and the attribute bytes are ignored on reading and recomputed on
 //! writing.
 
-use super::text::{has_nul, parse_coord, show, strip_comment, tokens, Lines, Next};
+use super::text::{has_nul, parse_coord, show, strip_comment, tokens, Lines, Next, MAX_LINE};
 use super::MAX_ELEMENTS;
 use super::{io_error, malformed, read_error, Encoding, FastBuild, IoError, Precision, RawMesh};
 use glam::DVec3;
@@ -64,6 +64,24 @@ impl Welder {
     }
 }
 
+/// True when the first bytes are ASCII STL text: no NUL byte, and the line after
+/// `solid name` starts with `facet` or `endsolid`. Used when an ASCII file happens
+/// to have the size of a binary one (binary headers often start with "solid" too).
+fn text_facets_follow(head: &[u8]) -> bool {
+    if head.contains(&0) {
+        return false;
+    }
+    let Some(nl) = head.iter().position(|&b| b == b'\n') else {
+        return false;
+    };
+    let rest = head.get(nl + 1..).unwrap_or(b"").trim_ascii_start();
+    let starts = |w: &[u8]| {
+        rest.get(..w.len())
+            .is_some_and(|s| s.eq_ignore_ascii_case(w))
+    };
+    starts(b"facet") || starts(b"endsolid")
+}
+
 /// Reads an STL file of `len` bytes.
 pub(crate) fn read<R: BufRead>(path: &Path, mut reader: R, len: u64) -> Result<RawMesh, IoError> {
     let mut head = Vec::with_capacity(84);
@@ -75,15 +93,15 @@ pub(crate) fn read<R: BufRead>(path: &Path, mut reader: R, len: u64) -> Result<R
         Some(&[a, b, c, d]) => Some(u32::from_le_bytes([a, b, c, d])),
         _ => None,
     };
-    if let Some(n) = count {
-        if 84 + 50 * u64::from(n) == len {
-            return read_binary(path, reader, n);
-        }
-    }
     let is_solid = head
         .trim_ascii_start()
         .get(..5)
         .is_some_and(|s| s.eq_ignore_ascii_case(b"solid"));
+    if let Some(n) = count {
+        if 84 + 50 * u64::from(n) == len && !(is_solid && text_facets_follow(&head)) {
+            return read_binary(path, reader, n);
+        }
+    }
     if is_solid {
         let chained = std::io::Read::chain(head.as_slice(), reader);
         return read_ascii(path, chained).map_err(|e| match (e, count) {
@@ -180,7 +198,7 @@ fn read_ascii<R: BufRead>(path: &Path, reader: R) -> Result<RawMesh, IoError> {
     let mut corners: Vec<u32> = Vec::with_capacity(4);
     let mut polygons = 0u64;
     loop {
-        let (ln, line) = match lines.next_line(None).map_err(|e| io_error(path, e))? {
+        let (ln, line) = match lines.next_line(MAX_LINE).map_err(|e| io_error(path, e))? {
             Next::Line(ln, l) => (ln, l),
             Next::Eof => break,
             Next::TooLong(ln) => return Err(malformed(path, Some(ln), "line too long")),
@@ -351,4 +369,34 @@ pub(crate) fn write<W: Write>(w: &mut W, raw: &RawMesh) -> std::io::Result<()> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ascii_text_is_recognised_in_the_first_bytes() {
+        assert!(text_facets_follow(b"solid cube\n  facet normal 0 0 1\n"));
+        assert!(text_facets_follow(b"solid\r\nendsolid\r\n"));
+        let mut binary = b"solid exported by some tool".to_vec();
+        binary.resize(84, 0);
+        assert!(!text_facets_follow(&binary));
+        assert!(!text_facets_follow(
+            b"solid name without newline in 84 bytes"
+        ));
+    }
+
+    #[test]
+    fn welder_merges_signed_zeros_only() {
+        let mut pos = Vec::new();
+        let mut w = Welder::new(4);
+        let a = w.vertex(DVec3::new(0.0, 1.0, 2.0), &mut pos);
+        let b = w.vertex(DVec3::new(-0.0, 1.0, 2.0), &mut pos);
+        let c = w.vertex(DVec3::new(f64::from(0.1f32), 1.0, 2.0), &mut pos);
+        let d = w.vertex(DVec3::new(0.1, 1.0, 2.0), &mut pos);
+        assert_eq!((a, b), (Some(0), Some(0)));
+        assert_eq!((c, d), (Some(1), Some(2)));
+        assert_eq!(pos.len(), 3);
+    }
 }

@@ -5,6 +5,10 @@
 
 use std::io::{BufRead, Read};
 
+/// Longest data line accepted by the text readers (a polygon of millions of
+/// vertices still fits).
+pub(crate) const MAX_LINE: u64 = 64 << 20;
+
 /// A line reader over a buffered source that counts lines (1-based) and bytes.
 pub(crate) struct Lines<R> {
     inner: R,
@@ -63,24 +67,20 @@ impl<R: BufRead> Lines<R> {
         Some((self.line, s))
     }
 
-    /// The next line, reading at most `max` bytes for it when given.
-    pub(crate) fn next_line(&mut self, max: Option<u64>) -> std::io::Result<Next<'_>> {
+    /// The next line, reading at most `max` bytes for it (so that junk without
+    /// newlines cannot make the reader buffer a whole file).
+    pub(crate) fn next_line(&mut self, max: u64) -> std::io::Result<Next<'_>> {
         self.buf.clear();
-        let n = match max {
-            Some(m) => (&mut self.inner)
-                .take(m + 1)
-                .read_until(b'\n', &mut self.buf)?,
-            None => self.inner.read_until(b'\n', &mut self.buf)?,
-        };
+        let n = (&mut self.inner)
+            .take(max.saturating_add(1))
+            .read_until(b'\n', &mut self.buf)?;
         if n == 0 {
             return Ok(Next::Eof);
         }
         self.consumed += n as u64;
         self.line += 1;
-        if let Some(m) = max {
-            if n as u64 > m && self.buf.last() != Some(&b'\n') {
-                return Ok(Next::TooLong(self.line));
-            }
+        if n as u64 > max && self.buf.last() != Some(&b'\n') {
+            return Ok(Next::TooLong(self.line));
         }
         let mut s: &[u8] = &self.buf;
         if let Some(t) = s.strip_suffix(b"\n") {
@@ -136,7 +136,20 @@ pub(crate) fn parse_i64(tok: &[u8]) -> Option<i64> {
 
 /// Parses a finite coordinate, or says what is wrong with the token.
 pub(crate) fn parse_coord(tok: &[u8]) -> Result<f64, String> {
-    match parse_f64(tok) {
+    check_coord(tok, parse_f64(tok))
+}
+
+/// Parses a finite coordinate declared as a 32-bit float (rounded once, from the
+/// decimal text to `f32`, then widened exactly).
+pub(crate) fn parse_coord_f32(tok: &[u8]) -> Result<f64, String> {
+    let v = std::str::from_utf8(tok)
+        .ok()
+        .and_then(|s| s.parse::<f32>().ok());
+    check_coord(tok, v.map(f64::from))
+}
+
+fn check_coord(tok: &[u8], v: Option<f64>) -> Result<f64, String> {
+    match v {
         Some(v) if v.is_finite() => Ok(v),
         Some(_) => Err(format!(
             "non-finite coordinate '{}' (NaN and infinity are not allowed)",
