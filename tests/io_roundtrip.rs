@@ -699,3 +699,65 @@ proptest! {
         check_round_trip(&m, false)?;
     }
 }
+
+/// Valid files of every format and encoding, as bytes (written once).
+fn sample_files() -> &'static [(String, Vec<u8>)] {
+    static FILES: std::sync::OnceLock<Vec<(String, Vec<u8>)>> = std::sync::OnceLock::new();
+    FILES.get_or_init(make_sample_files)
+}
+
+fn make_sample_files() -> Vec<(String, Vec<u8>)> {
+    let m = RawMesh {
+        positions: vec![DVec3::ZERO, DVec3::X, DVec3::Y, DVec3::new(1.0, 1.0, 0.5)],
+        faces: vec![[0, 1, 2], [1, 3, 2]],
+        colors: Some(vec![
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [1.0; 3],
+        ]),
+        ..RawMesh::default()
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let mut out = Vec::new();
+    for t in targets() {
+        let mut m = m.clone();
+        m.encoding = t.encoding;
+        m.precision = t.precision;
+        let name = format!("s.{}", ext(t.format));
+        let p = dir.path().join(&name);
+        io::write(&p, &m, None).unwrap();
+        out.push((name, std::fs::read(&p).unwrap()));
+    }
+    out
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    /// Corrupted files (bytes overwritten, then truncated) give Ok or a content
+    /// error naming the file, never a panic.
+    #[test]
+    fn corrupted_files_never_panic(
+        which in 0usize..14,
+        edits in prop::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..6),
+        cut in any::<prop::sample::Index>(),
+        do_cut in any::<bool>(),
+    ) {
+        let files = sample_files();
+        let (name, mut bytes) = files[which % files.len()].clone();
+        for (i, b) in edits {
+            let k = i.index(bytes.len());
+            bytes[k] = b;
+        }
+        if do_cut {
+            let k = cut.index(bytes.len());
+            bytes.truncate(k);
+        }
+        let (_d, _p, r) = read_bytes(&name, &bytes);
+        if let Err(e) = r {
+            prop_assert!(e.is_malformed(), "{}", e);
+            prop_assert!(e.to_string().contains(&name), "{}", e);
+        }
+    }
+}

@@ -4,10 +4,20 @@
 //! precision and encoding); writers take one back. The mesh builder
 //! ([`crate::mesh::Mesh::from_raw`]) turns the soup into a half-edge mesh.
 //!
-//! Bit-exactness: coordinates are held as `f64`. A file that stored `f32` reads into
-//! `f64` exactly and is written back as `f32` (exact); text formats are written with
-//! the shortest representation that round-trips, so every input vertex reads back
-//! identical.
+//! Bit-exactness: coordinates are held as `f64`. A file that stored `f32` (binary
+//! STL, PLY `float`, also ASCII PLY `float`, parsed straight to `f32`) reads into
+//! `f64` exactly, is marked [`Precision::F32`] and is written back as the same `f32`.
+//! Text is written with Rust's shortest representation that round-trips (of the
+//! `f64`, or of the `f32` when the precision is `F32`), so every input vertex reads
+//! back identical: bit-identical `f64` for `F64` meshes, the identical `f32` for
+//! `F32` meshes. Readers never reorder vertices (STL, which has no shared vertices,
+//! numbers its welded vertices in order of first appearance).
+//!
+//! Layout: one module per format (`obj`, `ply`, `stl`, `off`), shared line/token
+//! helpers in `text`, atomic output in `atomic`. Every reader streams through a
+//! buffered reader, checks header counts against the file size before reserving
+//! memory, and never panics on bad input; every error names the file (and the line
+//! for text formats where known).
 
 use glam::DVec3;
 use serde::{Deserialize, Serialize};

@@ -386,15 +386,15 @@ fn read_header<R: BufRead>(
                     Scalar::parse(s)
                         .ok_or_else(|| bad(format!("unknown property type '{}'", show(s))))
                 };
-                let first = t.next();
-                let kind = if first == Some(b"list") {
+                let head = t.next();
+                let kind = if head == Some(b"list") {
                     let c = ty(t.next())?;
                     if !c.is_int() {
                         return Err(bad("a list count must have an integer type".into()));
                     }
                     Kind::List(c, ty(t.next())?)
                 } else {
-                    Kind::Scalar(ty(first)?)
+                    Kind::Scalar(ty(head)?)
                 };
                 let name = t
                     .next()
