@@ -25,6 +25,43 @@ struct Node {
     count: u32,
 }
 
+impl Node {
+    const EMPTY: Node = Node {
+        lo: [0.0; 3],
+        hi: [0.0; 3],
+        first: 0,
+        count: 0,
+    };
+}
+
+/// A primitive's box centre and index, during the build.
+#[derive(Clone, Copy)]
+struct Item {
+    c: [f32; 3],
+    id: u32,
+}
+
+/// A box of centres.
+#[derive(Clone, Copy)]
+struct CBox {
+    lo: [f32; 3],
+    hi: [f32; 3],
+}
+
+impl CBox {
+    const EMPTY: CBox = CBox {
+        lo: [f32::INFINITY; 3],
+        hi: [f32::NEG_INFINITY; 3],
+    };
+    #[inline]
+    fn add(&mut self, c: [f32; 3]) {
+        for (a, &x) in c.iter().enumerate() {
+            self.lo[a] = self.lo[a].min(x);
+            self.hi[a] = self.hi[a].max(x);
+        }
+    }
+}
+
 /// The tree.
 #[derive(Clone, Debug, Default)]
 pub struct Bvh {
@@ -75,124 +112,27 @@ fn step_f32(y: f32, up: bool) -> f32 {
 impl Bvh {
     /// Builds the tree over `n` primitives; `bounds(i)` gives the box (min, max) of
     /// primitive `i`. Primitives with a non-finite box are still stored (their box is
-    /// widened to everything), so nothing is lost.
-    pub fn build(n: usize, bounds: impl Fn(usize) -> (DVec3, DVec3)) -> Bvh {
+    /// widened to everything), so nothing is lost. Large trees are built on up to
+    /// `available_parallelism` threads (one subtree each below the top splits).
+    pub fn build(n: usize, bounds: impl Fn(usize) -> (DVec3, DVec3) + Sync) -> Bvh {
         if n == 0 {
             return Bvh::default();
         }
-        // the mesh's u32 half-edge ids keep n below 2^31, so u32 node indices suffice
-        let mut cent: Vec<[f32; 3]> = Vec::with_capacity(n);
+        // the mesh's u32 half-edge ids keep n below 2^31, so u32 indices suffice.
+        // Items (centre, id) are partitioned in place, so every pass is sequential.
+        let mut items: Vec<Item> = Vec::with_capacity(n);
+        let mut root = CBox::EMPTY;
         for i in 0..n {
             let (lo, hi) = bounds(i);
             let c = (lo + hi) * 0.5;
-            cent.push([c.x as f32, c.y as f32, c.z as f32]);
+            let c = [c.x as f32, c.y as f32, c.z as f32];
+            root.add(c);
+            items.push(Item { c, id: i as u32 });
         }
-        let mut perm: Vec<u32> = (0..n as u32).collect();
-        let mut nodes: Vec<Node> = Vec::with_capacity(n / 2 + 1);
-        nodes.push(Node {
-            lo: [0.0; 3],
-            hi: [0.0; 3],
-            first: 0,
-            count: n as u32,
-        });
-        // (node, start, end)
-        let mut stack: Vec<(usize, usize, usize)> = vec![(0, 0, n)];
-        while let Some((ni, s, e)) = stack.pop() {
-            let count = e - s;
-            if count <= MAX_LEAF {
-                nodes[ni].first = s as u32;
-                nodes[ni].count = count as u32;
-                continue;
-            }
-            // box of the centres
-            let mut clo = [f32::INFINITY; 3];
-            let mut chi = [f32::NEG_INFINITY; 3];
-            for &p in &perm[s..e] {
-                let c = cent[p as usize];
-                for a in 0..3 {
-                    clo[a] = clo[a].min(c[a]);
-                    chi[a] = chi[a].max(c[a]);
-                }
-            }
-            let ext = [chi[0] - clo[0], chi[1] - clo[1], chi[2] - clo[2]];
-            let axis = if ext[0] >= ext[1] && ext[0] >= ext[2] {
-                0
-            } else if ext[1] >= ext[2] {
-                1
-            } else {
-                2
-            };
-            let mut mid = s;
-            if ext[axis] > 0.0 && ext[axis].is_finite() {
-                let split = clo[axis] + 0.5 * ext[axis];
-                // partition: centres below the split first
-                let (mut i, mut j) = (s, e);
-                while i < j {
-                    if cent[perm[i] as usize][axis] < split {
-                        i += 1;
-                    } else {
-                        j -= 1;
-                        perm.swap(i, j);
-                    }
-                }
-                mid = i;
-                if mid == s || mid == e {
-                    let h = s + count / 2;
-                    perm[s..e].select_nth_unstable_by(h - s, |&x, &y| {
-                        cent[x as usize][axis].total_cmp(&cent[y as usize][axis])
-                    });
-                    mid = h;
-                }
-            }
-            if mid == s || mid == e {
-                mid = s + count / 2;
-            }
-            let left = nodes.len();
-            nodes.push(Node {
-                lo: [0.0; 3],
-                hi: [0.0; 3],
-                first: 0,
-                count: 0,
-            });
-            nodes.push(Node {
-                lo: [0.0; 3],
-                hi: [0.0; 3],
-                first: 0,
-                count: 0,
-            });
-            nodes[ni].first = left as u32;
-            nodes[ni].count = 0;
-            stack.push((left, s, mid));
-            stack.push((left + 1, mid, e));
-        }
-        // refit: children always come after their parent
-        for ni in (0..nodes.len()).rev() {
-            let nd = nodes[ni];
-            let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-            if nd.count > 0 {
-                for &p in &perm[nd.first as usize..(nd.first + nd.count) as usize] {
-                    let (l, h) = bounds(p as usize);
-                    let (l, h) = if l.is_finite() && h.is_finite() {
-                        (l, h)
-                    } else {
-                        (DVec3::splat(f64::NEG_INFINITY), DVec3::splat(f64::INFINITY))
-                    };
-                    for a in 0..3 {
-                        lo[a] = lo[a].min(f32_down(l[a]));
-                        hi[a] = hi[a].max(f32_up(h[a]));
-                    }
-                }
-            } else {
-                for c in [nodes[nd.first as usize], nodes[nd.first as usize + 1]] {
-                    for a in 0..3 {
-                        lo[a] = lo[a].min(c.lo[a]);
-                        hi[a] = hi[a].max(c.hi[a]);
-                    }
-                }
-            }
-            nodes[ni].lo = lo;
-            nodes[ni].hi = hi;
-        }
+        let threads = std::thread::available_parallelism().map_or(1, |t| t.get());
+        let par = usize::BITS - (threads.max(1) - 1).leading_zeros(); // ceil(log2)
+        let nodes = build_sub(&mut items, 0, root, par, &bounds);
+        let perm = items.iter().map(|it| it.id).collect();
         Bvh { nodes, perm }
     }
 
@@ -234,6 +174,164 @@ impl Bvh {
         }
         false
     }
+}
+
+/// Below this many primitives a subtree is built on the calling thread.
+const PAR_MIN: usize = 1 << 16;
+
+/// Splits `items` (centres in the box `cb`) in two at the middle of the longest
+/// axis of `cb`, or by count when that leaves a side empty. Returns the split index
+/// and the centre boxes of both sides.
+fn split(items: &mut [Item], cb: CBox) -> (usize, CBox, CBox) {
+    let count = items.len();
+    let ext = [
+        cb.hi[0] - cb.lo[0],
+        cb.hi[1] - cb.lo[1],
+        cb.hi[2] - cb.lo[2],
+    ];
+    let axis = if ext[0] >= ext[1] && ext[0] >= ext[2] {
+        0
+    } else if ext[1] >= ext[2] {
+        1
+    } else {
+        2
+    };
+    let (mut lb, mut rb) = (CBox::EMPTY, CBox::EMPTY);
+    let mut mid = 0;
+    if ext[axis] > 0.0 && ext[axis].is_finite() {
+        let cut = cb.lo[axis] + 0.5 * ext[axis];
+        let (mut i, mut j) = (0, count);
+        while i < j {
+            let c = items[i].c;
+            if c[axis] < cut {
+                lb.add(c);
+                i += 1;
+            } else {
+                rb.add(c);
+                j -= 1;
+                items.swap(i, j);
+            }
+        }
+        mid = i;
+    }
+    if mid == 0 || mid == count {
+        // all centres on one side (or all equal): split by count
+        mid = count / 2;
+        items.select_nth_unstable_by(mid, |x, y| x.c[axis].total_cmp(&y.c[axis]));
+        lb = CBox::EMPTY;
+        rb = CBox::EMPTY;
+        for it in &items[..mid] {
+            lb.add(it.c);
+        }
+        for it in &items[mid..] {
+            rb.add(it.c);
+        }
+    }
+    (mid, lb, rb)
+}
+
+/// Builds the subtree over `items` (which start at `base` in the final order) and
+/// fits its boxes; node 0 of the result is its root. With `par > 0` the two halves
+/// of the top split are built on two threads.
+fn build_sub<F>(items: &mut [Item], base: usize, cb: CBox, par: u32, bounds: &F) -> Vec<Node>
+where
+    F: Fn(usize) -> (DVec3, DVec3) + Sync,
+{
+    let n = items.len();
+    if par > 0 && n >= PAR_MIN {
+        let (mid, lb, rb) = split(items, cb);
+        let (li, ri) = items.split_at_mut(mid);
+        let (left, right) = std::thread::scope(|sc| {
+            let spawned = std::thread::Builder::new()
+                .spawn_scoped(sc, move || build_sub(li, base, lb, par - 1, bounds));
+            match spawned {
+                Ok(h) => {
+                    let right = build_sub(ri, base + mid, rb, par - 1, bounds);
+                    let left = h.join().unwrap_or_else(|e| std::panic::resume_unwind(e));
+                    (left, right)
+                }
+                // no thread to be had: build both here (li was moved into the
+                // closure that failed to start, so split again from the slices)
+                Err(_) => (Vec::new(), Vec::new()),
+            }
+        });
+        if left.is_empty() || right.is_empty() {
+            return build_sub(items, base, cb, 0, bounds);
+        }
+        // layout: root, left root, right root, rest of left, rest of right
+        let nl = left.len();
+        let map_l = |i: u32| if i == 0 { 1 } else { i + 2 };
+        let map_r = |i: u32| if i == 0 { 2 } else { i + 2 + nl as u32 - 1 };
+        let mut nodes = Vec::with_capacity(nl + right.len() + 1);
+        let (l0, r0) = (left[0], right[0]);
+        let mut root = Node::EMPTY;
+        for a in 0..3 {
+            root.lo[a] = l0.lo[a].min(r0.lo[a]);
+            root.hi[a] = l0.hi[a].max(r0.hi[a]);
+        }
+        root.first = 1;
+        nodes.push(root);
+        let fix = |mut nd: Node, map: &dyn Fn(u32) -> u32| {
+            if nd.count == 0 {
+                nd.first = map(nd.first);
+            }
+            nd
+        };
+        nodes.push(fix(l0, &map_l));
+        nodes.push(fix(r0, &map_r));
+        nodes.extend(left[1..].iter().map(|&nd| fix(nd, &map_l)));
+        nodes.extend(right[1..].iter().map(|&nd| fix(nd, &map_r)));
+        return nodes;
+    }
+    let mut nodes: Vec<Node> = Vec::with_capacity(n / 2 + 1);
+    nodes.push(Node::EMPTY);
+    // (node, start, end, box of the centres), positions local to `items`
+    let mut stack: Vec<(usize, usize, usize, CBox)> = vec![(0, 0, n, cb)];
+    while let Some((ni, s, e, cb)) = stack.pop() {
+        if e - s <= MAX_LEAF {
+            nodes[ni].first = (base + s) as u32;
+            nodes[ni].count = (e - s) as u32;
+            continue;
+        }
+        let (mid, lb, rb) = split(&mut items[s..e], cb);
+        let left = nodes.len();
+        nodes.push(Node::EMPTY);
+        nodes.push(Node::EMPTY);
+        nodes[ni].first = left as u32;
+        nodes[ni].count = 0;
+        stack.push((left, s, s + mid, lb));
+        stack.push((left + 1, s + mid, e, rb));
+    }
+    // fit the boxes: children always come after their parent
+    for ni in (0..nodes.len()).rev() {
+        let nd = nodes[ni];
+        let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+        if nd.count > 0 {
+            let s = nd.first as usize - base;
+            for it in &items[s..s + nd.count as usize] {
+                let (l, h) = bounds(it.id as usize);
+                let (l, h) = if l.is_finite() && h.is_finite() {
+                    (l, h)
+                } else {
+                    (DVec3::splat(f64::NEG_INFINITY), DVec3::splat(f64::INFINITY))
+                };
+                for a in 0..3 {
+                    lo[a] = lo[a].min(f32_down(l[a]));
+                    hi[a] = hi[a].max(f32_up(h[a]));
+                }
+            }
+        } else {
+            for c in [nodes[nd.first as usize], nodes[nd.first as usize + 1]] {
+                for a in 0..3 {
+                    lo[a] = lo[a].min(c.lo[a]);
+                    hi[a] = hi[a].max(c.hi[a]);
+                }
+            }
+        }
+        nodes[ni].lo = lo;
+        nodes[ni].hi = hi;
+    }
+    nodes
 }
 
 /// Closed boxes `[alo, ahi]` and `[blo, bhi]` meet.
@@ -303,6 +401,50 @@ mod tests {
         });
         hits.sort_unstable();
         assert_eq!(hits, (0..n).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn large_tree_built_in_parallel_matches_brute_force() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let n = 3 * PAR_MIN + 17;
+        let boxes: Vec<(DVec3, DVec3)> = (0..n)
+            .map(|_| {
+                let a = DVec3::new(rng.random(), rng.random(), rng.random()) * 100.0;
+                let d = DVec3::new(rng.random(), rng.random(), rng.random());
+                (a, a + d)
+            })
+            .collect();
+        let bvh = Bvh::build(n, |i| boxes[i]);
+        assert_eq!(bvh.len(), n);
+        let mut seen = vec![false; n];
+        for &p in &bvh.perm {
+            assert!(!std::mem::replace(&mut seen[p as usize], true));
+        }
+        for q in 0..20 {
+            let lo = DVec3::new(rng.random(), rng.random(), rng.random()) * 100.0;
+            let hi = lo + DVec3::splat(q as f64 * 0.5);
+            let mut got = Vec::new();
+            bvh.query(lo, hi, |i| {
+                if boxes_meet(boxes[i].0, boxes[i].1, lo, hi) {
+                    got.push(i);
+                }
+                false
+            });
+            got.sort_unstable();
+            assert_eq!(got, brute(&boxes, lo, hi));
+        }
+        // every node box contains its children's
+        for nd in &bvh.nodes {
+            if nd.count == 0 {
+                for c in [
+                    bvh.nodes[nd.first as usize],
+                    bvh.nodes[nd.first as usize + 1],
+                ] {
+                    assert!((0..3).all(|a| nd.lo[a] <= c.lo[a] && c.hi[a] <= nd.hi[a]));
+                }
+            }
+        }
     }
 
     proptest! {

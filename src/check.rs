@@ -205,8 +205,12 @@ fn face_tri(mesh: &Mesh, f: usize) -> Option<([DVec3; 3], [u64; 3])> {
 
 /// Bounding box of mesh face `f` (an empty box when out of range).
 fn face_box(mesh: &Mesh, f: usize) -> (DVec3, DVec3) {
-    match face_tri(mesh, f) {
-        Some((p, _)) => tri_box(&p),
+    let pos = &mesh.positions;
+    match mesh.topo.faces().get(f) {
+        Some(&[a, b, c]) => match (pos.get(a.idx()), pos.get(b.idx()), pos.get(c.idx())) {
+            (Some(&a), Some(&b), Some(&c)) => (a.min(b).min(c), a.max(b).max(c)),
+            _ => (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        },
         None => (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
     }
 }
