@@ -14,6 +14,7 @@
 //! ```
 #![forbid(unsafe_code)]
 
+pub mod bvh;
 pub mod check;
 pub mod fill;
 pub mod io;
