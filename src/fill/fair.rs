@@ -91,7 +91,7 @@ fn build_operator(local: &LocalMesh, weights: Weights, norm: Normalization) -> O
         let [a, b, c] = t.map(|i| p[i as usize]);
         let l = (b - a).length().max((c - b).length()).max((a - c).length());
         let ar = geom::tri_area(a, b, c);
-        if !(ar > 1e-12 * l * l) || !ar.is_finite() {
+        if !ar.is_finite() || ar <= 1e-12 * l * l {
             for &i in t {
                 degenerate[i as usize] = true;
             }
@@ -152,7 +152,7 @@ fn build_operator(local: &LocalMesh, weights: Weights, norm: Normalization) -> O
                 e.1 = w;
             }
             let s: f64 = nbrs[v].iter().map(|e| e.1).sum();
-            if !(s > 0.0) || !s.is_finite() {
+            if !s.is_finite() || s <= 0.0 {
                 uniform = true;
             }
         }
@@ -172,7 +172,7 @@ fn build_operator(local: &LocalMesh, weights: Weights, norm: Normalization) -> O
                 }
             }
             Normalization::VoronoiArea => {
-                if uniform || !(area[v] > 0.0) {
+                if uniform || area[v].is_nan() || area[v] <= 0.0 {
                     // fall back to the umbrella form, scaled like an area-normalised
                     // operator would be (1 / mean squared edge length)
                     let l2: f64 = nbrs[v]
@@ -225,8 +225,8 @@ impl FairSolver {
         let op = build_operator(local, weights, norm);
         let mut col = vec![usize::MAX; n];
         let mut unknowns = Vec::new();
-        for v in 0..n {
-            if local.free[v] {
+        for (v, &is_free) in local.free.iter().enumerate() {
+            if is_free {
                 col[v] = unknowns.len();
                 unknowns.push(v);
             }

@@ -29,13 +29,15 @@ use std::collections::{HashMap, HashSet};
 /// Loop chords `(a, b)`, `a < b`, that are existing mesh edges (loop edges excluded).
 pub fn forbidden_chords(mesh: &Mesh, lp: &[VertexId]) -> HashSet<(u32, u32)> {
     let k = lp.len();
-    let index: HashMap<VertexId, u32> = lp.iter().enumerate().map(|(i, &v)| (v, i as u32)).collect();
+    let index: HashMap<VertexId, u32> =
+        lp.iter().enumerate().map(|(i, &v)| (v, i as u32)).collect();
     let mut out = HashSet::new();
     for (i, &v) in lp.iter().enumerate() {
         for w in mesh.topo.neighbors(v) {
             if let Some(&j) = index.get(&w) {
                 let i = i as u32;
-                let adjacent = (i as usize + 1) % k == j as usize || (j as usize + 1) % k == i as usize;
+                let adjacent =
+                    (i as usize + 1) % k == j as usize || (j as usize + 1) % k == i as usize;
                 if !adjacent && i != j {
                     out.insert((i.min(j), i.max(j)));
                 }
@@ -89,7 +91,7 @@ pub fn loop_scales(mesh: &Mesh, lp: &[VertexId], fallback: f64) -> Vec<f64> {
 }
 
 /// Relaxation rounds on the refined (flat) patch before fairing.
-const RELAX_FLAT: usize = 8;
+const RELAX_FLAT: usize = 10;
 /// Relaxation rounds on the faired patch before the second fairing.
 const RELAX_FAIRED: usize = 4;
 
@@ -97,11 +99,15 @@ const RELAX_FAIRED: usize = 4;
 pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
     let k = ctx.hole.len();
     if k < 3 {
-        return Err(FillError::Failed(format!("a loop of {k} vertices cannot be filled")));
+        return Err(FillError::Failed(format!(
+            "a loop of {k} vertices cannot be filled"
+        )));
     }
     let pts = ctx.boundary_positions();
     if pts.iter().any(|p| !p.is_finite()) {
-        return Err(FillError::Failed("the loop has a non-finite coordinate".into()));
+        return Err(FillError::Failed(
+            "the loop has a non-finite coordinate".into(),
+        ));
     }
     let forbidden = forbidden_chords(ctx.mesh, &ctx.hole.vertices);
     let outside = outside_normals(ctx.mesh, &ctx.hole.vertices);
@@ -120,7 +126,12 @@ pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
     r.refine(ctx.policy.refine.density, &ctx.deadline)?;
     let refined = r.pos.len() > k;
     if refined {
-        r.relax(RELAX_FLAT, &ctx.deadline)?;
+        let extra = if ctx.policy.fair.continuity == 0 {
+            RELAX_FAIRED
+        } else {
+            0
+        };
+        r.relax(RELAX_FLAT + extra, &ctx.deadline)?;
     }
     let mut patch = Patch {
         new_vertices: r.pos[k..].to_vec(),

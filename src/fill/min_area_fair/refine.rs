@@ -35,6 +35,8 @@ pub struct Refiner<'a> {
     edges: HashMap<(u32, u32), u32>,
     k: usize,
     forbidden: &'a HashSet<(u32, u32)>,
+    /// Relaxation uses valence flips (else Delaunay swaps).
+    pub valence: bool,
 }
 
 /// Hard cap on the refined patch size (a guard against absurd scales).
@@ -43,7 +45,12 @@ pub const MAX_TRIANGLES: usize = 4_000_000;
 impl<'a> Refiner<'a> {
     /// A refiner over loop positions `pos` (k = pos.len()), their scales and an initial
     /// triangulation; `forbidden` holds the loop chords that are existing mesh edges.
-    pub fn new(pos: Vec<DVec3>, scale: Vec<f64>, tris: Vec<[u32; 3]>, forbidden: &'a HashSet<(u32, u32)>) -> Refiner<'a> {
+    pub fn new(
+        pos: Vec<DVec3>,
+        scale: Vec<f64>,
+        tris: Vec<[u32; 3]>,
+        forbidden: &'a HashSet<(u32, u32)>,
+    ) -> Refiner<'a> {
         let k = pos.len();
         let mut edges = HashMap::with_capacity(tris.len() * 3);
         for (t, tri) in tris.iter().enumerate() {
@@ -58,12 +65,13 @@ impl<'a> Refiner<'a> {
             edges,
             k,
             forbidden,
+            valence: true,
         }
     }
 
     /// Runs split rounds and swaps until no triangle splits.
     pub fn refine(&mut self, density: f64, deadline: &Deadline) -> Result<(), FillError> {
-        if !(density > 0.0) || !density.is_finite() {
+        if !density.is_finite() || density <= 0.0 {
             return Ok(());
         }
         let mut rounds = 0usize;
@@ -92,7 +100,8 @@ impl<'a> Refiner<'a> {
             let [a, b, c] = self.tris[t];
             let [pa, pb, pc] = [a, b, c].map(|i| self.pos[i as usize]);
             let cen = (pa + pb + pc) / 3.0;
-            let sc = (self.scale[a as usize] + self.scale[b as usize] + self.scale[c as usize]) / 3.0;
+            let sc =
+                (self.scale[a as usize] + self.scale[b as usize] + self.scale[c as usize]) / 3.0;
             let ok = [a, b, c].iter().all(|&v| {
                 let d = density * (cen - self.pos[v as usize]).length();
                 d > sc && d > self.scale[v as usize]
@@ -148,8 +157,60 @@ impl<'a> Refiner<'a> {
         true
     }
 
-    /// Swaps the edge a-b (triangles (a,b,c), (b,a,d)) when it is not locally
-    /// Delaunay and the swap is admissible. Returns the new edge `(c, d)`.
+    /// The flip of edge a-b (triangles `(a, b, c)`, `(b, a, d)`) to c-d, when it is
+    /// admissible: the new edge is allowed, neither new triangle is degenerate or
+    /// folds against the pair it replaces. Returns `(t1, t2, c, d)`.
+    fn flip_candidate(&self, a: u32, b: u32) -> Option<(u32, u32, u32, u32)> {
+        let (Some(&t1), Some(&t2)) = (self.edges.get(&(a, b)), self.edges.get(&(b, a))) else {
+            return None;
+        };
+        let c = Self::third(self.tris[t1 as usize], a, b);
+        let d = Self::third(self.tris[t2 as usize], a, b);
+        if !self.edge_allowed(c, d) {
+            return None;
+        }
+        let [pa, pb, pc, pd] = [a, b, c, d].map(|i| self.pos[i as usize]);
+        let n_old = (pb - pa).cross(pc - pa) + (pa - pb).cross(pd - pb);
+        let n1 = (pa - pc).cross(pd - pc);
+        let n2 = (pb - pd).cross(pc - pd);
+        let l2 = (pc - pd).length_squared().max((pa - pb).length_squared());
+        if !(n1.dot(n_old) > 0.0 && n2.dot(n_old) > 0.0)
+            || n1.length() <= 1e-12 * l2
+            || n2.length() <= 1e-12 * l2
+        {
+            return None;
+        }
+        Some((t1, t2, c, d))
+    }
+
+    /// The smallest angle after flipping a-b to c-d is at least the smaller of the
+    /// smallest angle before and 15 degrees (a valence flip must not make slivers).
+    fn flip_keeps_angles(&self, a: u32, b: u32, c: u32, d: u32) -> bool {
+        let [pa, pb, pc, pd] = [a, b, c, d].map(|i| self.pos[i as usize]);
+        let min3 = |x: DVec3, y: DVec3, z: DVec3| {
+            let g = super::super::geom::angles(x, y, z);
+            g[0].min(g[1]).min(g[2])
+        };
+        let before = min3(pa, pb, pc).min(min3(pb, pa, pd));
+        let after = min3(pc, pa, pd).min(min3(pd, pb, pc));
+        after >= before.min(15f64.to_radians())
+    }
+
+    fn do_flip(&mut self, a: u32, b: u32, (t1, t2, c, d): (u32, u32, u32, u32)) {
+        self.tris[t1 as usize] = [c, a, d];
+        self.tris[t2 as usize] = [d, b, c];
+        self.edges.remove(&(a, b));
+        self.edges.remove(&(b, a));
+        self.edges.insert((c, a), t1);
+        self.edges.insert((a, d), t1);
+        self.edges.insert((d, c), t1);
+        self.edges.insert((d, b), t2);
+        self.edges.insert((b, c), t2);
+        self.edges.insert((c, d), t2);
+    }
+
+    /// Swaps the edge a-b when it is not locally Delaunay and the swap is admissible.
+    /// Returns the new edge `(c, d)`.
     fn try_swap(&mut self, a: u32, b: u32) -> Option<(u32, u32)> {
         let (Some(&t1), Some(&t2)) = (self.edges.get(&(a, b)), self.edges.get(&(b, a))) else {
             return None;
@@ -162,32 +223,85 @@ impl<'a> Refiner<'a> {
         if alpha + beta <= std::f64::consts::PI + 1e-10 {
             return None;
         }
-        if !self.edge_allowed(c, d) {
-            return None;
-        }
-        let n_old = (pb - pa).cross(pc - pa) + (pa - pb).cross(pd - pb);
-        let n1 = (pa - pc).cross(pd - pc);
-        let n2 = (pb - pd).cross(pc - pd);
-        let l2 = (pc - pd).length_squared().max((pa - pb).length_squared());
-        if !(n1.dot(n_old) > 0.0 && n2.dot(n_old) > 0.0) || n1.length() <= 1e-12 * l2 || n2.length() <= 1e-12 * l2 {
-            return None;
-        }
-        self.tris[t1 as usize] = [c, a, d];
-        self.tris[t2 as usize] = [d, b, c];
-        self.edges.remove(&(a, b));
-        self.edges.remove(&(b, a));
-        self.edges.insert((c, a), t1);
-        self.edges.insert((a, d), t1);
-        self.edges.insert((d, c), t1);
-        self.edges.insert((d, b), t2);
-        self.edges.insert((b, c), t2);
-        self.edges.insert((c, d), t2);
+        let f = self.flip_candidate(a, b)?;
+        self.do_flip(a, b, f);
         Some((c, d))
+    }
+
+    /// Flips that bring vertex valences toward their ideal: 6 for a new vertex, and for
+    /// a loop vertex one more than its patch angle in multiples of 60 degrees (the
+    /// number of near-equilateral triangles that fit). Returns the number of flips.
+    pub fn valence_flips(&mut self, deadline: &Deadline) -> Result<usize, FillError> {
+        let n = self.pos.len();
+        let k = self.k;
+        let mut angle = vec![0.0f64; k];
+        for t in &self.tris {
+            for c in 0..3 {
+                let v = t[c] as usize;
+                if v < k {
+                    let [p, q, r] =
+                        [t[c], t[(c + 1) % 3], t[(c + 2) % 3]].map(|i| self.pos[i as usize]);
+                    angle[v] += super::super::geom::angle_at(p, q, r);
+                }
+            }
+        }
+        let target: Vec<i64> = (0..n)
+            .map(|v| {
+                if v < k {
+                    ((angle[v] / (std::f64::consts::PI / 3.0)).round() as i64 + 1).max(2)
+                } else {
+                    6
+                }
+            })
+            .collect();
+        let mut val = vec![0i64; n];
+        let mut keys: Vec<(u32, u32)> = self.edges.keys().copied().collect();
+        keys.sort_unstable();
+        for &(a, b) in &keys {
+            if a < b || !self.edges.contains_key(&(b, a)) {
+                val[a as usize] += 1;
+                val[b as usize] += 1;
+            }
+        }
+        let mut flips = 0;
+        for _pass in 0..4 {
+            deadline.check()?;
+            let mut keys: Vec<(u32, u32)> =
+                self.edges.keys().copied().filter(|&(a, b)| a < b).collect();
+            keys.sort_unstable();
+            let mut changed = 0;
+            for (a, b) in keys {
+                let Some(f) = self.flip_candidate(a, b) else {
+                    continue;
+                };
+                let (c, d) = (f.2, f.3);
+                let dev = |v: u32, dv: i64| {
+                    let x = val[v as usize] + dv - target[v as usize];
+                    x * x
+                };
+                let before = dev(a, 0) + dev(b, 0) + dev(c, 0) + dev(d, 0);
+                let after = dev(a, -1) + dev(b, -1) + dev(c, 1) + dev(d, 1);
+                if after < before && self.flip_keeps_angles(a, b, c, d) {
+                    self.do_flip(a, b, f);
+                    val[a as usize] -= 1;
+                    val[b as usize] -= 1;
+                    val[c as usize] += 1;
+                    val[d as usize] += 1;
+                    changed += 1;
+                }
+            }
+            flips += changed;
+            if changed == 0 {
+                break;
+            }
+        }
+        Ok(flips)
     }
 
     /// Lawson flips until every interior edge is locally Delaunay (or the budget runs out).
     pub fn delaunay_swaps(&mut self, deadline: &Deadline) -> Result<usize, FillError> {
-        let mut stack: Vec<(u32, u32)> = self.edges.keys().copied().filter(|&(a, b)| a < b).collect();
+        let mut stack: Vec<(u32, u32)> =
+            self.edges.keys().copied().filter(|&(a, b)| a < b).collect();
         stack.sort_unstable();
         let budget = 20 * self.tris.len() + 1000;
         let mut flips = 0usize;
@@ -225,15 +339,14 @@ impl<'a> Refiner<'a> {
             }
             let mut ring: Vec<Vec<u32>> = vec![Vec::new(); n - k];
             let mut fan: Vec<Vec<u32>> = vec![Vec::new(); n - k];
-            for &(a, b) in self.edges.keys() {
-                if a as usize >= k {
-                    ring[a as usize - k].push(b);
-                }
+            if self.valence {
+                self.valence_flips(deadline)?;
             }
             for (t, tri) in self.tris.iter().enumerate() {
-                for &v in tri {
+                for (c, &v) in tri.iter().enumerate() {
                     if v as usize >= k {
                         fan[v as usize - k].push(t as u32);
+                        ring[v as usize - k].push(tri[(c + 1) % 3]);
                     }
                 }
             }
@@ -276,7 +389,13 @@ impl<'a> Refiner<'a> {
                 let ok = fan[v - k].iter().all(|&t| {
                     let tri = self.tris[t as usize];
                     let before = tri.map(|i| self.pos[i as usize]);
-                    let after = tri.map(|i| if i as usize == v { q } else { self.pos[i as usize] });
+                    let after = tri.map(|i| {
+                        if i as usize == v {
+                            q
+                        } else {
+                            self.pos[i as usize]
+                        }
+                    });
                     let nb_ = (before[1] - before[0]).cross(before[2] - before[0]);
                     let na = (after[1] - after[0]).cross(after[2] - after[0]);
                     let l2 = (after[1] - after[0])
@@ -289,7 +408,9 @@ impl<'a> Refiner<'a> {
                     self.pos[v] = q;
                 }
             }
-            self.delaunay_swaps(deadline)?;
+            if !self.valence {
+                self.delaunay_swaps(deadline)?;
+            }
         }
         Ok(())
     }

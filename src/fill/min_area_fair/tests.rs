@@ -80,7 +80,10 @@ pub(crate) fn icosphere(level: usize, r: f64) -> RawMesh {
 fn cut(raw: &RawMesh, cut: impl Fn(DVec3) -> bool) -> RawMesh {
     let mut out = raw.clone();
     out.faces.retain(|f| {
-        let c = (raw.positions[f[0] as usize] + raw.positions[f[1] as usize] + raw.positions[f[2] as usize]) / 3.0;
+        let c = (raw.positions[f[0] as usize]
+            + raw.positions[f[1] as usize]
+            + raw.positions[f[2] as usize])
+            / 3.0;
         !cut(c)
     });
     out
@@ -91,7 +94,12 @@ fn mesh_and_hole(raw: &RawMesh, pick: impl Fn(&Mesh, &[VertexId]) -> bool) -> (M
     let (mesh, _) = Mesh::from_raw(raw);
     mesh.validate().unwrap();
     let policy = Policy::default();
-    let loops: Vec<Vec<VertexId>> = mesh.topo.boundary_loops().into_iter().filter(|l| pick(&mesh, l)).collect();
+    let loops: Vec<Vec<VertexId>> = mesh
+        .topo
+        .boundary_loops()
+        .into_iter()
+        .filter(|l| pick(&mesh, l))
+        .collect();
     assert_eq!(loops.len(), 1, "expected one hole loop");
     let hole = Hole::new(0, &mesh, loops[0].clone(), &policy);
     (mesh, hole, policy)
@@ -112,7 +120,11 @@ fn fill_checked(mesh: &mut Mesh, hole: &Hole, policy: &Policy) -> Patch {
     let before: Vec<DVec3> = mesh.positions.clone();
     apply_patch(mesh, hole, &patch).unwrap();
     mesh.validate().unwrap();
-    assert!(mesh.topo.boundary_loops().iter().all(|l| l.len() != hole.len() || l != &hole.vertices));
+    assert!(mesh
+        .topo
+        .boundary_loops()
+        .iter()
+        .all(|l| l.len() != hole.len() || l != &hole.vertices));
     // untouched input vertices are bit-exact
     assert_eq!(&mesh.positions[..before.len()], &before[..]);
     patch
@@ -165,9 +177,12 @@ fn planar_hole_gives_a_planar_patch() {
                 assert!(p.z.abs() < 1e-9, "{weights:?} c={c}: {p}");
             }
             // refined to the surrounding density: edges near 1 (grid spacing)
-            // cotangent weights keep the refined layout on a plane (linear precision)
+            // cotangent weights keep the refined layout on a plane (linear precision);
+            // the staircase boundary of a grid hole (right angles, 1 and sqrt 2 edges)
+            // caps the share of near-equilateral triangles along it
             if weights == Weights::Cotangent {
                 let share = q_share(&mesh, &hole, &patch);
+                eprintln!("planar c={c}: q share {share:.3}");
                 assert!(share > 0.7, "{weights:?} c={c}: q share {share}");
             }
         }
@@ -178,15 +193,24 @@ fn sphere_case(level: usize, angle_deg: f64) -> (Mesh, Hole, Policy) {
     let r = 10.0;
     let raw = icosphere(level, r);
     let dir = DVec3::new(0.3, 0.5, 0.8).normalize();
-    let raw = cut(&raw, |p| p.normalize().dot(dir) > angle_deg.to_radians().cos());
+    let raw = cut(&raw, |p| {
+        p.normalize().dot(dir) > angle_deg.to_radians().cos()
+    });
     mesh_and_hole(&raw, |_, _| true)
 }
 
 /// (mean |r - R| / R, max |r - R| / R) of the new vertices.
 fn sphere_error(patch: &Patch, r: f64) -> (f64, f64) {
     let n = patch.new_vertices.len() as f64;
-    let errs: Vec<f64> = patch.new_vertices.iter().map(|p| (p.length() - r).abs() / r).collect();
-    (errs.iter().sum::<f64>() / n, errs.iter().cloned().fold(0.0, f64::max))
+    let errs: Vec<f64> = patch
+        .new_vertices
+        .iter()
+        .map(|p| (p.length() - r).abs() / r)
+        .collect();
+    (
+        errs.iter().sum::<f64>() / n,
+        errs.iter().cloned().fold(0.0, f64::max),
+    )
 }
 
 #[test]
@@ -196,9 +220,13 @@ fn sphere_hole_of_about_20_vertices() {
     let patch = fill_checked(&mut mesh, &hole, &policy);
     let (mean, max) = sphere_error(&patch, 10.0);
     let share = q_share(&mesh, &hole, &patch);
-    eprintln!("sphere k={} new={} mean={mean:.5} max={max:.5} q={share:.3}", hole.len(), patch.new_vertices.len());
+    eprintln!(
+        "sphere k={} new={} mean={mean:.5} max={max:.5} q={share:.3}",
+        hole.len(),
+        patch.new_vertices.len()
+    );
     assert!(mean < 0.002, "mean radial error {mean}");
-    assert!(share > 0.7, "q share {share}");
+    assert!(share > 0.8, "q share {share}");
 }
 
 #[test]
@@ -208,8 +236,219 @@ fn sphere_hole_of_about_100_vertices() {
     let patch = fill_checked(&mut mesh, &hole, &policy);
     let (mean, max) = sphere_error(&patch, 10.0);
     let share = q_share(&mesh, &hole, &patch);
-    eprintln!("sphere k={} new={} mean={mean:.5} max={max:.5} q={share:.3}", hole.len(), patch.new_vertices.len());
+    eprintln!(
+        "sphere k={} new={} mean={mean:.5} max={max:.5} q={share:.3}",
+        hole.len(),
+        patch.new_vertices.len()
+    );
     assert!(mean < 0.01, "mean radial error {mean}");
     assert!(share > 0.8, "q share {share}");
 }
 
+fn cylinder_case() -> (Mesh, Hole, Policy, f64) {
+    // open cylinder of radius 5 along z, 64 segments, 40 rings of height 0.5
+    let (r, seg, rings, dz) = (5.0, 64usize, 40usize, 0.5);
+    let mut raw = RawMesh::default();
+    for j in 0..=rings {
+        for i in 0..seg {
+            let t = i as f64 / seg as f64 * std::f64::consts::TAU;
+            raw.positions
+                .push(DVec3::new(r * t.cos(), r * t.sin(), j as f64 * dz));
+        }
+    }
+    let id = |i: usize, j: usize| (j * seg + i % seg) as u32;
+    for j in 0..rings {
+        for i in 0..seg {
+            raw.faces.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+            raw.faces.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+        }
+    }
+    let centre = DVec3::new(r, 0.0, 10.0);
+    let raw = cut(&raw, |p| (p - centre).length() < 2.6);
+    let top = rings as f64 * dz;
+    let (m, h, p) = mesh_and_hole(&raw, move |m, l| {
+        l.iter().all(|&v| m.pos(v).z > 0.0 && m.pos(v).z < top)
+    });
+    (m, h, p, r)
+}
+
+#[test]
+fn cylinder_hole_stays_on_the_cylinder() {
+    let (mut mesh, hole, policy, r) = cylinder_case();
+    let patch = fill_checked(&mut mesh, &hole, &policy);
+    let errs: Vec<f64> = patch
+        .new_vertices
+        .iter()
+        .map(|p| ((p.x * p.x + p.y * p.y).sqrt() - r).abs() / r)
+        .collect();
+    let mean = errs.iter().sum::<f64>() / errs.len() as f64;
+    let max = errs.iter().cloned().fold(0.0, f64::max);
+    let share = q_share(&mesh, &hole, &patch);
+    eprintln!(
+        "cylinder k={} new={} mean={mean:.5} max={max:.5} q={share:.3}",
+        hole.len(),
+        patch.new_vertices.len()
+    );
+    assert!(mean < 0.01, "mean radial error {mean}");
+    assert!(max < 0.03, "max radial error {max}");
+    assert!(share > 0.8, "q share {share}");
+}
+
+#[test]
+fn dihedral_weight_also_fills_the_sphere() {
+    let (mut mesh, hole, mut policy) = sphere_case(4, 14.0);
+    policy.refine.weight = TriangulationWeight::DihedralArea;
+    let patch = fill_checked(&mut mesh, &hole, &policy);
+    let (mean, _) = sphere_error(&patch, 10.0);
+    assert!(mean < 0.002, "mean radial error {mean}");
+}
+
+#[test]
+fn higher_continuity_fits_the_sphere_better_than_membrane() {
+    let mut errs = Vec::new();
+    for c in 1..=3u8 {
+        let (mut mesh, hole, mut policy) = sphere_case(5, 30.0);
+        policy.fair.continuity = c;
+        let patch = fill_checked(&mut mesh, &hole, &policy);
+        errs.push(sphere_error(&patch, 10.0).0);
+    }
+    eprintln!("sphere errors by continuity {errs:?}");
+    // a membrane is flat-ish: it sags well inside the sphere
+    assert!(errs[1] < errs[0] / 3.0, "{errs:?}");
+    assert!(errs[2] < errs[0] / 3.0, "{errs:?}");
+}
+
+/// A loop with no surrounding mesh but its own ring: an annulus of one strip.
+fn annulus(k: usize, wave: f64) -> (Mesh, Hole, Policy) {
+    let mut raw = RawMesh::default();
+    for i in 0..k {
+        let t = i as f64 / k as f64 * std::f64::consts::TAU;
+        let r = k as f64 / std::f64::consts::TAU;
+        let z = wave * r * (2.0 * t).cos() * 0.3;
+        raw.positions.push(DVec3::new(r * t.cos(), r * t.sin(), z));
+        raw.positions
+            .push(DVec3::new((r + 1.0) * t.cos(), (r + 1.0) * t.sin(), z));
+    }
+    for i in 0..k {
+        let j = (i + 1) % k;
+        let (a, b, c, d) = (
+            2 * i as u32,
+            2 * j as u32,
+            2 * j as u32 + 1,
+            2 * i as u32 + 1,
+        );
+        raw.faces.push([a, b, c]);
+        raw.faces.push([a, c, d]);
+    }
+    mesh_and_hole(&raw, |m, l| {
+        l.iter().all(|&v| v.idx() % 2 == 0 && m.pos(v).is_finite())
+    })
+}
+
+#[test]
+fn long_loops_are_filled() {
+    // a full fill of a 300-vertex loop, flat and saddle-like (a 1,000-vertex one takes
+    // seconds in the test profile; its triangulation is tested below)
+    for wave in [0.0, 1.0] {
+        let (mut mesh, hole, policy) = annulus(300, wave);
+        let patch = fill_checked(&mut mesh, &hole, &policy);
+        if wave == 0.0 {
+            assert!(patch.new_vertices.iter().all(|p| p.z.abs() < 1e-9));
+        }
+        assert!(patch.new_vertices.len() > 1000);
+    }
+}
+
+#[test]
+fn thousand_vertex_loops_triangulate() {
+    for wave in [0.0, 1.0] {
+        let (mesh, hole, policy) = annulus(1000, wave);
+        let pts: Vec<DVec3> = hole.vertices.iter().map(|&v| mesh.pos(v)).collect();
+        let forbidden = forbidden_chords(&mesh, &hole.vertices);
+        let outside = outside_normals(&mesh, &hole.vertices);
+        for weight in [TriangulationWeight::Area, TriangulationWeight::DihedralArea] {
+            let input = triangulate::LoopInput {
+                pts: &pts,
+                forbidden: &forbidden,
+                outside_normals: &outside,
+                weight,
+                min_angle: policy.checks.min_angle_deg.to_radians(),
+                restricted_above: policy.refine.restricted_search_above,
+                deadline: Deadline::none(),
+            };
+            let tris = triangulate::triangulate(&input).unwrap();
+            let patch = Patch {
+                new_vertices: Vec::new(),
+                triangles: tris,
+            };
+            check_topology(&mesh, &hole.vertices, &patch).unwrap();
+        }
+    }
+}
+
+#[test]
+fn ten_thousand_vertex_loop_triangulates() {
+    let k = 10_000;
+    let pts: Vec<DVec3> = (0..k)
+        .map(|i| {
+            let t = -(i as f64) / k as f64 * std::f64::consts::TAU;
+            DVec3::new(t.cos(), t.sin(), 0.2 * (5.0 * t).sin())
+        })
+        .collect();
+    let forbidden = HashSet::new();
+    let outside = vec![None; k];
+    let input = triangulate::LoopInput {
+        pts: &pts,
+        forbidden: &forbidden,
+        outside_normals: &outside,
+        weight: TriangulationWeight::DihedralArea,
+        min_angle: 0.0,
+        restricted_above: 60,
+        deadline: Deadline::none(),
+    };
+    let tris = triangulate::triangulate(&input).unwrap();
+    assert_eq!(tris.len(), k - 2);
+}
+
+/// A mesh whose hole is a star-shaped polygon: the polygon plus a one-strip collar.
+fn star_hole(radii: &[f64], lift: f64) -> (Mesh, Hole, Policy) {
+    let k = radii.len();
+    let mut raw = RawMesh::default();
+    for (i, &r) in radii.iter().enumerate() {
+        let t = i as f64 / k as f64 * std::f64::consts::TAU;
+        let z = lift * (3.0 * t).sin();
+        raw.positions.push(DVec3::new(r * t.cos(), r * t.sin(), z));
+        raw.positions
+            .push(DVec3::new((r + 0.5) * t.cos(), (r + 0.5) * t.sin(), z));
+    }
+    for i in 0..k {
+        let j = (i + 1) % k;
+        let (a, b, c, d) = (
+            2 * i as u32,
+            2 * j as u32,
+            2 * j as u32 + 1,
+            2 * i as u32 + 1,
+        );
+        raw.faces.push([a, b, c]);
+        raw.faces.push([a, c, d]);
+    }
+    mesh_and_hole(&raw, |_, l| l.iter().all(|&v| v.idx() % 2 == 0))
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+    #[test]
+    fn random_star_polygons_give_disk_patches(
+        radii in proptest::collection::vec(0.5f64..2.0, 5..90),
+        lift in 0.0f64..0.5,
+        restricted in 3usize..80,
+    ) {
+        let (mut mesh, hole, mut policy) = star_hole(&radii, lift);
+        policy.refine.restricted_search_above = restricted;
+        let ctx = FillContext { mesh: &mesh, hole: &hole, policy: &policy, deadline: Deadline::none() };
+        let patch = fill(&ctx).unwrap();
+        check_topology(&mesh, &hole.vertices, &patch).unwrap();
+        apply_patch(&mut mesh, &hole, &patch).unwrap();
+        mesh.validate().unwrap();
+    }
+}

@@ -128,10 +128,13 @@ fn dihedral(n1: DVec3, n2: DVec3) -> f64 {
 fn tri_weight(inp: &LoopInput, a: u32, m: u32, b: u32) -> W {
     let [pa, pm, pb] = [a, m, b].map(|i| inp.pts[i as usize]);
     let area = super::super::geom::tri_area(pa, pm, pb);
-    let l = (pm - pa).length().max((pb - pm).length()).max((pa - pb).length());
+    let l = (pm - pa)
+        .length()
+        .max((pb - pm).length())
+        .max((pa - pb).length());
     let ang = super::super::geom::angles(pa, pm, pb);
     let min = ang[0].min(ang[1]).min(ang[2]);
-    let bad = !(area > 1e-12 * l * l) || min < inp.min_angle;
+    let bad = area.is_nan() || area <= 1e-12 * l * l || min < inp.min_angle;
     W {
         bad: bad as u32,
         dih: 0.0,
@@ -143,7 +146,9 @@ fn tri_weight(inp: &LoopInput, a: u32, m: u32, b: u32) -> W {
 pub fn triangulate(inp: &LoopInput) -> Result<Vec<[u32; 3]>, FillError> {
     let k = inp.k();
     if k < 3 {
-        return Err(FillError::Failed(format!("a loop of {k} vertices cannot be triangulated")));
+        return Err(FillError::Failed(format!(
+            "a loop of {k} vertices cannot be triangulated"
+        )));
     }
     if k == 3 {
         return Ok(vec![[0, 1, 2]]);
@@ -163,7 +168,9 @@ pub fn triangulate(inp: &LoopInput) -> Result<Vec<[u32; 3]>, FillError> {
 pub fn exact(inp: &LoopInput, idx: &[u32]) -> Result<Vec<[u32; 3]>, FillError> {
     let n = idx.len();
     if n < 3 {
-        return Err(FillError::Failed("polygon with fewer than 3 vertices".into()));
+        return Err(FillError::Failed(
+            "polygon with fewer than 3 vertices".into(),
+        ));
     }
     let at = |i: usize, j: usize| i * n + j;
     let mut best: Vec<Option<W>> = vec![None; n * n];
@@ -182,7 +189,11 @@ pub fn exact(inp: &LoopInput, idx: &[u32]) -> Result<Vec<[u32; 3]>, FillError> {
                 return None;
             }
             let m = m as usize;
-            Some(unit_normal(inp.pts[idx[i] as usize], inp.pts[idx[m] as usize], inp.pts[idx[j] as usize]))
+            Some(unit_normal(
+                inp.pts[idx[i] as usize],
+                inp.pts[idx[m] as usize],
+                inp.pts[idx[j] as usize],
+            ))
         }
     };
     for d in 2..n {
@@ -216,7 +227,7 @@ pub fn exact(inp: &LoopInput, idx: &[u32]) -> Result<Vec<[u32; 3]>, FillError> {
                     }
                     w.dih = w.dih.max(worst);
                 }
-                if cur.as_ref().is_none_or(|c| w.better_than(&c.0)) {
+                if cur.as_ref().map_or(true, |c| w.better_than(&c.0)) {
                     cur = Some((w, m as u32));
                 }
             }
@@ -266,9 +277,13 @@ fn cdt_candidates(inp: &LoopInput) -> Option<Vec<(u32, u32)>> {
     }
     let edges: Vec<[usize; 2]> = (0..k).map(|i| [i, (i + 1) % k]).collect();
     let mut conflict = false;
-    let cdt = ConstrainedDelaunayTriangulation::<Point2<f64>>::try_bulk_load_cdt(p2.clone(), edges, |_| {
-        conflict = true;
-    })
+    let cdt = ConstrainedDelaunayTriangulation::<Point2<f64>>::try_bulk_load_cdt(
+        p2.clone(),
+        edges,
+        |_| {
+            conflict = true;
+        },
+    )
     .ok()?;
     if conflict || cdt.num_vertices() != k {
         return None;
@@ -281,7 +296,8 @@ fn cdt_candidates(inp: &LoopInput) -> Option<Vec<(u32, u32)>> {
     let ccw = signed > 0.0;
     let vh = |i: usize| spade::handles::FixedVertexHandle::from_index(i);
     // seed faces: the inner side of every loop edge
-    let mut inside: HashSet<spade::handles::FixedFaceHandle<spade::handles::InnerTag>> = HashSet::new();
+    let mut inside: HashSet<spade::handles::FixedFaceHandle<spade::handles::InnerTag>> =
+        HashSet::new();
     let mut stack = Vec::new();
     for i in 0..k {
         let e = cdt.get_edge_from_neighbors(vh(i), vh((i + 1) % k))?;
@@ -360,7 +376,8 @@ fn restricted(inp: &LoopInput) -> Result<Option<Vec<[u32; 3]>>, FillError> {
         l.sort_unstable();
     }
     chords.sort_by_key(|&(a, b)| (b - a, a));
-    let mut best: HashMap<(u32, u32), (W, u32)> = HashMap::with_capacity(chords.len() * 2 + k as usize);
+    let mut best: HashMap<(u32, u32), (W, u32)> =
+        HashMap::with_capacity(chords.len() * 2 + k as usize);
     for a in 0..k - 1 {
         best.insert((a, a + 1), (W::ZERO, u32::MAX));
     }
@@ -370,7 +387,11 @@ fn restricted(inp: &LoopInput) -> Result<Option<Vec<[u32; 3]>>, FillError> {
             inp.outside(i, j)
         } else {
             let &(_, m) = best.get(&(i, j))?;
-            Some(unit_normal(inp.pts[i as usize], inp.pts[m as usize], inp.pts[j as usize]))
+            Some(unit_normal(
+                inp.pts[i as usize],
+                inp.pts[m as usize],
+                inp.pts[j as usize],
+            ))
         }
     };
     for (ci, &(i, j)) in chords.iter().enumerate() {
@@ -388,9 +409,16 @@ fn restricted(inp: &LoopInput) -> Result<Option<Vec<[u32; 3]>>, FillError> {
             };
             let mut w = wl.plus(wr).plus(tri_weight(inp, i, m, j));
             if dih {
-                let nt = unit_normal(inp.pts[i as usize], inp.pts[m as usize], inp.pts[j as usize]);
+                let nt = unit_normal(
+                    inp.pts[i as usize],
+                    inp.pts[m as usize],
+                    inp.pts[j as usize],
+                );
                 let mut worst = 0.0f64;
-                for nn in [side_normal(&best, i, m), side_normal(&best, m, j)].into_iter().flatten() {
+                for nn in [side_normal(&best, i, m), side_normal(&best, m, j)]
+                    .into_iter()
+                    .flatten()
+                {
                     worst = worst.max(dihedral(nt, nn));
                 }
                 if closing {
@@ -400,7 +428,7 @@ fn restricted(inp: &LoopInput) -> Result<Option<Vec<[u32; 3]>>, FillError> {
                 }
                 w.dih = w.dih.max(worst);
             }
-            if cur.as_ref().is_none_or(|c| w.better_than(&c.0)) {
+            if cur.as_ref().map_or(true, |c| w.better_than(&c.0)) {
                 cur = Some((w, m));
             }
         }
@@ -429,7 +457,7 @@ fn restricted(inp: &LoopInput) -> Result<Option<Vec<[u32; 3]>>, FillError> {
 
 /// Divide and conquer along short chords (see the module docs).
 fn divide(inp: &LoopInput, all: Vec<u32>) -> Result<Vec<[u32; 3]>, FillError> {
-    let leaf = inp.restricted_above.clamp(3, EXACT_MAX).min(60).max(12);
+    let leaf = inp.restricted_above.clamp(12, 60);
     let mut out = Vec::with_capacity(inp.k());
     let mut work = vec![all];
     while let Some(idx) = work.pop() {
@@ -460,11 +488,11 @@ fn divide(inp: &LoopInput, all: Vec<u32>) -> Result<Vec<[u32; 3]>, FillError> {
                 }
                 let along = arc[b] - arc[a];
                 let shorter = along.min(total - along);
-                if !(shorter > 0.0) {
+                if shorter.is_nan() || shorter <= 0.0 {
                     continue;
                 }
                 let d = (inp.pts[idx[a] as usize] - inp.pts[idx[b] as usize]).length() / shorter;
-                if best.is_none_or(|c| d < c.0) {
+                if best.map_or(true, |c| d < c.0) {
                     best = Some((d, a, b));
                 }
             }
@@ -475,7 +503,9 @@ fn divide(inp: &LoopInput, all: Vec<u32>) -> Result<Vec<[u32; 3]>, FillError> {
                 out.extend(exact(inp, &idx)?);
                 continue;
             }
-            return Err(FillError::Failed("no admissible chord to split the loop".into()));
+            return Err(FillError::Failed(
+                "no admissible chord to split the loop".into(),
+            ));
         };
         let first: Vec<u32> = idx[a..=b].to_vec();
         let mut second: Vec<u32> = idx[b..].to_vec();
@@ -490,7 +520,12 @@ fn divide(inp: &LoopInput, all: Vec<u32>) -> Result<Vec<[u32; 3]>, FillError> {
 mod tests {
     use super::*;
 
-    fn input<'a>(pts: &'a [DVec3], forb: &'a HashSet<(u32, u32)>, out: &'a [Option<DVec3>], above: usize) -> LoopInput<'a> {
+    fn input<'a>(
+        pts: &'a [DVec3],
+        forb: &'a HashSet<(u32, u32)>,
+        out: &'a [Option<DVec3>],
+        above: usize,
+    ) -> LoopInput<'a> {
         LoopInput {
             pts,
             forbidden: forb,
@@ -546,10 +581,18 @@ mod tests {
         assert_disk(4, &t);
         let area: f64 = t
             .iter()
-            .map(|t| crate::fill::geom::tri_area(pts[t[0] as usize], pts[t[1] as usize], pts[t[2] as usize]))
+            .map(|t| {
+                crate::fill::geom::tri_area(
+                    pts[t[0] as usize],
+                    pts[t[1] as usize],
+                    pts[t[2] as usize],
+                )
+            })
             .sum();
-        let a1 = crate::fill::geom::tri_area(pts[0], pts[1], pts[2]) + crate::fill::geom::tri_area(pts[0], pts[2], pts[3]);
-        let a2 = crate::fill::geom::tri_area(pts[0], pts[1], pts[3]) + crate::fill::geom::tri_area(pts[1], pts[2], pts[3]);
+        let a1 = crate::fill::geom::tri_area(pts[0], pts[1], pts[2])
+            + crate::fill::geom::tri_area(pts[0], pts[2], pts[3]);
+        let a2 = crate::fill::geom::tri_area(pts[0], pts[1], pts[3])
+            + crate::fill::geom::tri_area(pts[1], pts[2], pts[3]);
         assert!((area - a1.min(a2)).abs() < 1e-12);
     }
 
@@ -570,7 +613,17 @@ mod tests {
         }
         // all three long diagonals forbidden and the fans too: still possible?
         let mut f = HashSet::new();
-        for (a, b) in [(0, 2), (0, 3), (0, 4), (1, 3), (1, 4), (1, 5), (2, 4), (2, 5), (3, 5)] {
+        for (a, b) in [
+            (0, 2),
+            (0, 3),
+            (0, 4),
+            (1, 3),
+            (1, 4),
+            (1, 5),
+            (2, 4),
+            (2, 5),
+            (3, 5),
+        ] {
             f.insert((a, b));
         }
         assert!(triangulate(&input(&pts, &f, &o, 60)).is_err());
@@ -599,7 +652,13 @@ mod tests {
         let t = triangulate(&input(&pts, &f, &o, 60)).unwrap();
         let area: f64 = t
             .iter()
-            .map(|t| crate::fill::geom::tri_area(pts[t[0] as usize], pts[t[1] as usize], pts[t[2] as usize]))
+            .map(|t| {
+                crate::fill::geom::tri_area(
+                    pts[t[0] as usize],
+                    pts[t[1] as usize],
+                    pts[t[2] as usize],
+                )
+            })
             .sum();
         let exact_area = 0.5 * 80.0 * (std::f64::consts::TAU / 80.0).sin();
         assert!((area - exact_area).abs() < 1e-9);
