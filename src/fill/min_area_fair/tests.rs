@@ -452,3 +452,32 @@ proptest! {
         mesh.validate().unwrap();
     }
 }
+#[test]
+fn voronoi_normalisation_beats_the_raw_cotangent_operator_on_the_sphere() {
+    // the reason fair.rs normalises by the mixed Voronoi area: the refined patch has
+    // smaller triangles than the ring around it
+    for (level, angle) in [(4usize, 14.0f64), (5, 30.0)] {
+        let (mesh, hole, policy) = sphere_case(level, angle);
+        let ctx = FillContext {
+            mesh: &mesh,
+            hole: &hole,
+            policy: &policy,
+            deadline: Deadline::none(),
+        };
+        let patch = fill(&ctx).unwrap();
+        let err = |norm| {
+            let local = fair::local_from_patch(&mesh, &hole, &patch, 2);
+            let s = fair::FairSolver::new(&local, 2, Weights::Cotangent, norm).unwrap();
+            let p = Patch {
+                new_vertices: s.solve().unwrap(),
+                triangles: patch.triangles.clone(),
+            };
+            sphere_error(&p, 10.0).0
+        };
+        let (raw, vor) = (
+            err(fair::Normalization::None),
+            err(fair::Normalization::VoronoiArea),
+        );
+        assert!(vor < raw / 2.0, "voronoi {vor} raw {raw}");
+    }
+}
