@@ -2,6 +2,28 @@
 //! non-degenerate, the patch is a topological disk that closes the hole exactly (so
 //! the mesh stays edge-manifold and consistently oriented), and no new triangle
 //! intersects another triangle of the mesh or of the patch.
+//!
+//! Self-intersection: the broad phase is a bounding-volume hierarchy ([`crate::bvh`])
+//! over the mesh's faces built once in [`Checker::new`], plus a second tree over the
+//! faces committed since (rebuilt when its unindexed tail grows past an eighth of it)
+//! and a linear scan of that short tail; the narrow phase is an exact
+//! triangle-triangle test on `robust::orient3d`/`orient2d` signs ([`tri_tri`]).
+//!
+//! Readings where A5 is vague:
+//! - Triangles that share vertices follow CGAL's convention (as in
+//!   `Polygon_mesh_processing::self_intersections`): sharing one vertex they
+//!   intersect only if they meet somewhere else; sharing an edge only if they
+//!   overlap beyond it (a coplanar fold). Nothing else is excluded: a mesh face that
+//!   merely touches a patch triangle at a point that is not a shared vertex counts.
+//! - "Shared" is by identity, never by coordinates: a patch's loop vertex `i` is mesh
+//!   vertex `hole[i]`, new vertices are new. Copies of one input vertex made by the
+//!   mesh builder when it split a non-manifold vertex count as the same vertex while
+//!   they still sit at the same coordinates (else a hole at a pinch point could never
+//!   be filled: the other fan touches it there).
+//! - Patch triangles are tested against each other by the same rules.
+//! - The patch's own triangles are checked for degeneracy first, so the narrow phase
+//!   may assume them non-degenerate; a zero-area face of the mesh is handled exactly
+//!   (as the union of its edges).
 
 use crate::bvh::{boxes_meet, tri_box, Bvh};
 use crate::fill::geom;
