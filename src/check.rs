@@ -876,6 +876,74 @@ mod tests {
         }
     }
 
+    /// Separating-axis verdict in floating point: `Some(true/false)` when every
+    /// candidate axis is decisive by a margin, `None` when the case is too close
+    /// to call (or an axis is near zero).
+    fn sat(p: &[DVec3; 3], q: &[DVec3; 3]) -> Option<bool> {
+        let ep = [p[1] - p[0], p[2] - p[1], p[0] - p[2]];
+        let eq = [q[1] - q[0], q[2] - q[1], q[0] - q[2]];
+        let (np, nq) = (ep[0].cross(ep[1]), eq[0].cross(eq[1]));
+        let mut axes = vec![np, nq];
+        for a in ep {
+            axes.push(np.cross(a));
+            for b in eq {
+                axes.push(a.cross(b));
+            }
+        }
+        for b in eq {
+            axes.push(nq.cross(b));
+        }
+        let mut separated = false;
+        for ax in axes {
+            let len = ax.length();
+            if len < 1e-6 {
+                return None;
+            }
+            let proj = |t: &[DVec3; 3]| {
+                let d = t.map(|x| x.dot(ax) / len);
+                (d[0].min(d[1]).min(d[2]), d[0].max(d[1]).max(d[2]))
+            };
+            let ((a0, a1), (b0, b1)) = (proj(p), proj(q));
+            if a0 == a1 && b0 == b1 && a0 == b0 {
+                continue; // both flat on this axis, at the same place: no information
+            }
+            let gap = (b0 - a1).max(a0 - b1);
+            if gap.abs() < 1e-9 {
+                return None;
+            }
+            separated |= gap > 0.0;
+        }
+        Some(!separated)
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(2000))]
+        /// Agrees with an independent separating-axis test wherever that one is
+        /// decisive; and is unchanged by exact transformations (a power-of-two
+        /// scale, swapping the triangles).
+        #[test]
+        fn agrees_with_separating_axes(c in prop::array::uniform18(-1.0f64..1.0), k in -40i32..40) {
+            let t = |o: usize| [0, 1, 2].map(|i| v(c[o + 3 * i], c[o + 3 * i + 1], c[o + 3 * i + 2]));
+            let (p, q) = (t(0), t(9));
+            let r = tri_tri_plain(&p, &q);
+            if let Some(expect) = sat(&p, &q) {
+                prop_assert_eq!(r, expect);
+            }
+            let s = 2f64.powi(k);
+            prop_assert_eq!(r, tri_tri_plain(&q.map(|x| x * s), &p.map(|x| x * s)));
+        }
+
+        /// Coplanar pairs (both in z = 0) against the same oracle.
+        #[test]
+        fn coplanar_agrees_with_separating_axes(c in prop::array::uniform12(-1.0f64..1.0)) {
+            let t = |o: usize| [0, 1, 2].map(|i| v(c[o + 2 * i], c[o + 2 * i + 1], 0.0));
+            let (p, q) = (t(0), t(6));
+            if let Some(expect) = sat(&p, &q) {
+                prop_assert_eq!(tri_tri_plain(&p, &q), expect);
+            }
+        }
+    }
+
     // ---- whole-patch checks -------------------------------------------------
 
     /// A torus of 3 x 3 new vertices: closed, every vertex a single fan, chi = 0.
