@@ -4,9 +4,9 @@
 //! intersects another triangle of the mesh or of the patch.
 //!
 //! Self-intersection: the broad phase is a bounding-volume hierarchy ([`crate::bvh`])
-//! over the mesh's faces built once in [`Checker::new`], plus a second tree over the
-//! faces committed since (rebuilt when its unindexed tail grows past an eighth of it)
-//! and a linear scan of that short tail; the narrow phase is an exact
+//! over the mesh's faces built once in [`Checker::new`], plus a logarithmic set of
+//! small trees over the faces committed since and a linear scan of a short tail of
+//! them (see [`Checker`]); the narrow phase is an exact
 //! triangle-triangle test on `robust::orient3d`/`orient2d` signs ([`tri_tri`]).
 //!
 //! Readings where A5 is vague:
@@ -46,23 +46,36 @@ pub enum CheckFailure {
 }
 
 /// Holds what the checks need across holes: a bounding-volume hierarchy over the
-/// mesh's faces at construction, and a second, smaller one over the faces committed
-/// since (rebuilt as it grows), with a short tail of faces scanned linearly.
+/// mesh's faces at construction, and for the faces committed since, a logarithmic
+/// set of smaller trees (Bentley-Saxe: a full tail of `TAIL` faces becomes a tree,
+/// and trees of similar size are merged), plus the short tail scanned linearly. A
+/// query costs O(log² n); each committed face is rebuilt into a tree O(log n) times.
 pub struct Checker {
     /// Tree over the faces the mesh had at construction.
     base: Bvh,
-    /// Faces indexed after construction, in the order they were committed.
-    committed: Vec<u32>,
-    /// Tree over `committed[..extra_len]`; the rest is scanned linearly.
-    extra: Bvh,
-    extra_len: usize,
-    /// First face index not yet in `base` or `committed`.
+    /// Trees over committed faces, sizes decreasing.
+    levels: Vec<Level>,
+    /// Committed faces not yet in a tree (fewer than `TAIL`).
+    tail: Vec<u32>,
+    /// First face index not yet in `base`, `levels` or `tail`.
     next_unseen: usize,
 }
 
-/// The linear tail of committed faces may grow to this before the tree is rebuilt
-/// (or to an eighth of the tree's size, whichever is larger).
-const TAIL_MIN: usize = 64;
+/// A tree over some committed faces.
+struct Level {
+    faces: Vec<u32>,
+    tree: Bvh,
+}
+
+impl Level {
+    fn new(mesh: &Mesh, faces: Vec<u32>) -> Level {
+        let tree = Bvh::build(faces.len(), |i| face_box(mesh, faces[i] as usize));
+        Level { faces, tree }
+    }
+}
+
+/// Committed faces scanned linearly before they are put in a tree.
+const TAIL: usize = 64;
 
 impl Checker {
     /// Prepares the checks for a mesh: builds the tree over its faces.
@@ -71,9 +84,8 @@ impl Checker {
         let base = Bvh::build(nf, |f| face_box(mesh, f));
         Checker {
             base,
-            committed: Vec::new(),
-            extra: Bvh::default(),
-            extra_len: 0,
+            levels: Vec::new(),
+            tail: Vec::new(),
             next_unseen: nf,
         }
     }
@@ -110,15 +122,23 @@ impl Checker {
     pub fn commit(&mut self, mesh: &Mesh, faces: std::ops::Range<usize>) {
         let end = faces.end.max(self.next_unseen).min(mesh.num_faces());
         for f in self.next_unseen..end {
-            self.committed.push(f as u32);
+            self.tail.push(f as u32);
         }
         self.next_unseen = self.next_unseen.max(end);
-        let tail = self.committed.len() - self.extra_len;
-        if tail > TAIL_MIN.max(self.extra_len / 8) {
-            let list = &self.committed;
-            self.extra = Bvh::build(list.len(), |i| face_box(mesh, list[i] as usize));
-            self.extra_len = list.len();
+        if self.tail.len() < TAIL {
+            return;
         }
+        let mut faces = std::mem::take(&mut self.tail);
+        // merge with every smaller-or-equal level at the end (a binary counter)
+        while let Some(last) = self.levels.last() {
+            if last.faces.len() > faces.len() {
+                break;
+            }
+            if let Some(l) = self.levels.pop() {
+                faces.extend_from_slice(&l.faces);
+            }
+        }
+        self.levels.push(Level::new(mesh, faces));
     }
 
     /// The self-intersection check (see [`tri_tri`] for the rules on shared vertices).
@@ -182,11 +202,10 @@ impl Checker {
             };
             let found = self.base.query(lo, hi, &mut test)
                 || self
-                    .extra
-                    .query(lo, hi, |j| test(self.committed[j] as usize))
-                || self.committed[self.extra_len..]
+                    .levels
                     .iter()
-                    .any(|&f| test(f as usize))
+                    .any(|l| l.tree.query(lo, hi, |j| test(l.faces[j] as usize)))
+                || self.tail.iter().any(|&f| test(f as usize))
                 || (self.next_unseen..mesh.num_faces()).any(&mut test);
             if found {
                 if let Some(f) = hit {
@@ -1235,7 +1254,16 @@ mod tests {
             inc.commit(&m, f..e);
             f = e;
         }
-        assert!(inc.extra_len > 0 && inc.extra_len < inc.committed.len());
+        // 288 faces in batches of 7: trees of 70 merged into 140, then 280, tail 8
+        assert!(!inc.levels.is_empty() && !inc.tail.is_empty() && inc.tail.len() < TAIL);
+        let sizes: Vec<usize> = inc.levels.iter().map(|l| l.faces.len()).collect();
+        assert!(sizes.windows(2).all(|w| w[0] > w[1]), "{sizes:?}");
+        let total: usize = sizes.iter().sum::<usize>() + inc.tail.len();
+        assert_eq!(total, m.num_faces() - nb);
+        let mut all: Vec<u32> = inc.levels.iter().flat_map(|l| l.faces.clone()).collect();
+        all.extend_from_slice(&inc.tail);
+        all.sort_unstable();
+        assert_eq!(all, (nb as u32..m.num_faces() as u32).collect::<Vec<_>>());
         for (apex, ok) in [
             (v(3., 3., 0.1), true),
             (v(3., 3., 1.), false),
