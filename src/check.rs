@@ -1276,4 +1276,52 @@ mod tests {
             assert_eq!(a.is_ok(), b.is_ok());
         }
     }
+
+    #[test]
+    fn dispatcher_rejects_a_fan_through_an_obstacle_and_fills_without_it() {
+        use crate::fill::{fill_hole, Hole};
+        use crate::policy::{Method, Policy};
+        use crate::report::{HoleStatus, Outcome};
+        let mut policy = Policy::default();
+        policy.dispatch.small = vec![Method::Fan];
+        for obstacle in [true, false] {
+            // a grid missing cell (2, 2), and a small upright triangle through the
+            // cell's centre (its own component)
+            let mut raw = RawMesh::default();
+            grid(5, 0.0, 0, &[(2, 2)], &mut raw);
+            if obstacle {
+                let b = raw.positions.len() as u32;
+                raw.positions
+                    .extend([v(2.5, 2.4, -0.5), v(2.6, 2.6, 0.5), v(2.4, 2.6, 0.5)]);
+                raw.faces.push([b, b + 1, b + 2]);
+            }
+            let (mut m, _) = Mesh::from_raw(&raw);
+            let l = m
+                .topo
+                .boundary_loops()
+                .into_iter()
+                .find(|l| l.len() == 4)
+                .unwrap();
+            let hole = Hole::new(0, &m, l, &policy);
+            let mut chk = Checker::new(&m);
+            let nf = m.num_faces();
+            let rep = fill_hole(&mut m, &hole, &policy, &mut chk);
+            if obstacle {
+                assert_eq!(rep.status, HoleStatus::Failed);
+                assert_eq!(rep.tried[0].outcome, Outcome::Rejected);
+                assert!(
+                    rep.tried[0].reason.contains("intersects mesh face"),
+                    "{}",
+                    rep.tried[0].reason
+                );
+                assert_eq!(m.num_faces(), nf);
+            } else {
+                assert_eq!(rep.status, HoleStatus::Filled, "{}", rep.reason);
+                assert_eq!(m.num_faces(), nf + 4);
+                m.validate().unwrap();
+                // the patch's faces were committed to the checker
+                assert_eq!(chk.tail.len(), 4);
+            }
+        }
+    }
 }
