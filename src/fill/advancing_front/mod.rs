@@ -56,8 +56,13 @@
 //!   fallbacks are tried (ear, bisector, bisector merged into the nearest front
 //!   vertex); if none is valid the vertex is set aside until its neighbourhood changes.
 //!   When every front vertex is set aside the method fails.
-//! - **Bounded.** At most `max_steps_per_vertex · k` steps, and the deadline is checked
-//!   every step.
+//! - **Bounded.** At most `max_steps_per_vertex · k` steps (a step is one processed
+//!   front vertex, taken or set aside), the deadline is checked every step, and a
+//!   front that grows past `4k + 64` vertices is declared divergent (it spreads away
+//!   from the hole instead of closing, as on a sphere with more than a hemisphere
+//!   missing). Note that the steps a hole needs grow with its area: a round planar
+//!   hole needs about `k²/8` steps, so the default 200 steps per vertex limits round
+//!   holes to about 1,600 boundary vertices.
 //!
 //! After closing: an angle-improving edge-swap pass, and with `front.fair` a few
 //! iterations of umbrella smoothing of the new vertices (boundary fixed), then the
@@ -72,9 +77,10 @@ mod tests;
 use super::{geom, FillContext, FillError, Patch};
 use crate::mesh::VertexId;
 use glam::DVec3;
+use improve::FxSet;
 use intersect::{Grid, Obstacles};
 use std::cmp::Ordering;
-use std::collections::{BinaryHeap, HashMap, HashSet};
+use std::collections::{BinaryHeap, HashMap};
 use std::f64::consts::PI;
 
 /// Smallest angle (degrees) a step may create (at least the checks' minimum).
@@ -84,11 +90,14 @@ const STEP_MIN_ANGLE_DEG: f64 = 2.0;
 const FOLD_COS: f64 = -0.5;
 /// Key offset of a vertex set aside (larger than any angle).
 const BLOCKED: f64 = 10.0;
+/// The front has diverged when it holds more than this many times the loop's
+/// vertices (plus 64): it is spreading away instead of closing.
+const DIVERGE_FACTOR: usize = 4;
 /// Umbrella relaxation: iterations and step.
 const RELAX_ITERATIONS: usize = 8;
 const RELAX_LAMBDA: f64 = 0.5;
-/// Edge-swap passes.
-const SWAP_PASSES: usize = 10;
+/// Edge swaps: at most this many per patch triangle.
+const SWAPS_PER_TRIANGLE: usize = 10;
 
 /// Fills the hole with the improved advancing front.
 pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
@@ -99,9 +108,25 @@ pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
         )));
     }
     let params = Params::from_policy(ctx)?;
+    let t0 = std::time::Instant::now();
     let mut b = Builder::new(ctx, params)?;
+    let t1 = std::time::Instant::now();
     b.run()?;
-    b.finish()
+    let t2 = std::time::Instant::now();
+    let steps = b.steps;
+    let patch = b.finish()?;
+    tracing::debug!(
+        hole = ctx.hole.id,
+        k,
+        steps,
+        new_vertices = patch.new_vertices.len(),
+        triangles = patch.triangles.len(),
+        setup_ms = (t1 - t0).as_secs_f64() * 1e3,
+        front_ms = (t2 - t1).as_secs_f64() * 1e3,
+        finish_ms = t2.elapsed().as_secs_f64() * 1e3,
+        "advancing front closed"
+    );
+    Ok(patch)
 }
 
 /// Validated parameters (angles in radians).
@@ -135,7 +160,12 @@ impl Params {
         if !(f.merge_distance >= 0.0 && f.merge_distance.is_finite()) {
             return bad("merge_distance must be a finite number >= 0");
         }
-        let min_deg = ctx.policy.checks.min_angle_deg.max(STEP_MIN_ANGLE_DEG);
+        // no triangle has a smallest angle above 60 degrees
+        let min_deg = ctx
+            .policy
+            .checks
+            .min_angle_deg
+            .clamp(STEP_MIN_ANGLE_DEG, 60.0);
         Ok(Params {
             angle_small: f.angle_small.to_radians(),
             angle_large: f.angle_large.to_radians(),
@@ -237,8 +267,8 @@ struct Builder<'a> {
     size: Vec<f64>,
     hole_normal: DVec3,
     tris: Vec<[u32; 3]>,
-    edges: HashSet<(u32, u32)>,
-    forbidden: HashSet<(u32, u32)>,
+    edges: FxSet<(u32, u32)>,
+    forbidden: FxSet<(u32, u32)>,
     nodes: Vec<Node>,
     front_size: Vec<usize>,
     alive: usize,
@@ -249,6 +279,8 @@ struct Builder<'a> {
     obstacles: Obstacles,
     cell: f64,
     steps: usize,
+    applied: usize,
+    set_aside: usize,
 }
 
 #[inline]
@@ -296,7 +328,7 @@ impl<'a> Builder<'a> {
             return failed("cannot orient the hole (no loop or vertex normal)");
         }
         // mesh edges between loop vertices that are not loop edges
-        let mut forbidden = HashSet::new();
+        let mut forbidden = FxSet::default();
         for (i, &v) in hole.iter().enumerate() {
             for w in mesh.topo.neighbors(v) {
                 if let Some(&j) = index.get(&w) {
@@ -307,7 +339,8 @@ impl<'a> Builder<'a> {
                 }
             }
         }
-        let mut edges = HashSet::with_capacity(k * 8);
+        let mut edges = FxSet::default();
+        edges.reserve(k * 8);
         for i in 0..k {
             edges.insert(ekey(i as u32, ((i + 1) % k) as u32));
         }
@@ -390,6 +423,8 @@ impl<'a> Builder<'a> {
             obstacles,
             cell,
             steps: 0,
+            applied: 0,
+            set_aside: 0,
         })
     }
 
@@ -592,7 +627,7 @@ impl<'a> Builder<'a> {
         let mut normals = Vec::with_capacity(tris.len());
         for t in &tris {
             let [a, b, c] = t.map(at);
-            if improve::min_angle(a, b, c) < self.p.min_angle {
+            if improve::min_angle_sin(a, b, c) < self.p.min_angle.sin() {
                 return None;
             }
             let nr = geom::tri_normal_raw(a, b, c).normalize_or_zero();
@@ -1028,8 +1063,12 @@ impl<'a> Builder<'a> {
             self.steps += 1;
             if self.steps > self.p.max_steps {
                 return failed(format!(
-                    "front did not close after {} steps",
-                    self.p.max_steps
+                    "front did not close after {} steps ({} taken, {} set aside; {} triangles, {} front vertices left)",
+                    self.p.max_steps,
+                    self.applied,
+                    self.set_aside,
+                    self.tris.len(),
+                    self.alive
                 ));
             }
             let ev = self.eval(e.node);
@@ -1048,11 +1087,21 @@ impl<'a> Builder<'a> {
                 }
             }
             match self.try_steps(e.node, &ev) {
-                Some(plan) => self.apply(plan)?,
+                Some(plan) => {
+                    self.applied += 1;
+                    self.apply(plan)?;
+                    if self.alive > DIVERGE_FACTOR * self.k + 64 {
+                        return failed(format!(
+                            "the front diverges: {} front vertices from a loop of {} after {} steps",
+                            self.alive, self.k, self.steps
+                        ));
+                    }
+                }
                 None => {
                     let nd = &mut self.nodes[e.node as usize];
                     nd.version = nd.version.wrapping_add(1);
                     nd.blocked = true;
+                    self.set_aside += 1;
                     self.heap.push(Entry {
                         key: ev.theta + BLOCKED,
                         node: e.node,
@@ -1091,20 +1140,40 @@ impl<'a> Builder<'a> {
         };
         let raw_tris = self.tris.clone();
         let mut tris = self.tris.clone();
-        improve::swap_edges(&self.pos, &mut tris, &rules, SWAP_PASSES);
+        let t = std::time::Instant::now();
+        let n_swaps = improve::swap_edges(&self.pos, &mut tris, &rules, SWAPS_PER_TRIANGLE);
+        tracing::debug!(
+            ms = t.elapsed().as_secs_f64() * 1e3,
+            n_swaps,
+            "advancing front: swaps"
+        );
+        self.ctx.deadline.check()?;
         let mut candidates: Vec<(Vec<DVec3>, Vec<[u32; 3]>)> = Vec::new();
         if self.p.fair {
             // Switch to `super::fair::fair_patch` here once it lands.
             let mut pos = self.pos.clone();
+            let t = std::time::Instant::now();
             relax(&mut pos, k, &tris, rules.min_angle);
+            tracing::debug!(
+                ms = t.elapsed().as_secs_f64() * 1e3,
+                "advancing front: relax"
+            );
             let mut t2 = tris.clone();
-            improve::swap_edges(&pos, &mut t2, &rules, SWAP_PASSES);
+            improve::swap_edges(&pos, &mut t2, &rules, SWAPS_PER_TRIANGLE);
             candidates.push((pos, t2));
         }
         candidates.push((self.pos.clone(), tris));
         candidates.push((self.pos.clone(), raw_tris));
         for (pos, tris) in candidates {
-            if self.patch_is_clean(&pos, &tris) {
+            self.ctx.deadline.check()?;
+            let t = std::time::Instant::now();
+            let clean = self.patch_is_clean(&pos, &tris);
+            tracing::debug!(
+                ms = t.elapsed().as_secs_f64() * 1e3,
+                clean,
+                "advancing front: patch verified"
+            );
+            if clean {
                 return Ok(Patch {
                     new_vertices: pos[k..].to_vec(),
                     triangles: tris,

@@ -381,6 +381,7 @@ fn planar_circular_hole_in_a_grid_stays_planar() {
             assert!((DVec2::new(p.x, p.y) - DVec2::new(15.0, 15.0)).length() < 9.5);
         }
         assert!(s.q_good >= 0.8, "q share {}", s.q_good);
+        assert!(s.valence6 >= 0.6, "valence-6 share {}", s.valence6);
     }
 }
 
@@ -516,6 +517,7 @@ fn sphere_case(
             "a new vertex lies {out} outside the sphere"
         );
         assert!(s.q_good >= 0.8, "q share {}", s.q_good);
+        assert!(s.valence6 >= 0.6, "valence-6 share {}", s.valence6);
     }
 }
 
@@ -666,6 +668,36 @@ fn nearly_self_touching_c_loop() {
     assert!(filled_or_clean_error("C", &mesh, &lp), "the C should fill");
 }
 
+/// More than a hemisphere missing: the loop is smaller than the hole behind it (the
+/// paper's divergent case).
+#[test]
+fn divergent_sphere_hole() {
+    let (mesh, lp) = sphere_with_hole(4, 2.0);
+    filled_or_clean_error("divergent sphere", &mesh, &lp);
+}
+
+/// A hole in a height field `z = f(x, y)`; the patch stays within the range of the
+/// surface heights around the loop, widened by the amplitude.
+#[test]
+fn saddle_hole() {
+    let poly = circle(64, 4.0, DVec2::ZERO);
+    let (mut mesh, lp) = planar_with_hole(&poly, 0.4, -7.0, 7.0);
+    let f = |x: f64, y: f64| 0.05 * (x * x - y * y);
+    for p in mesh.positions.iter_mut() {
+        p.z = f(p.x, p.y);
+    }
+    let (hole, r) = run(&mesh, &lp, &Policy::default());
+    let patch = r.unwrap();
+    let s = validate(&mesh, &hole, &patch);
+    report("saddle", lp.len(), &s);
+    for p in &patch.new_vertices {
+        // the saddle spans [-0.8, 0.8] over the disk
+        assert!(p.z.abs() <= 0.85, "z = {}", p.z);
+        assert!(DVec2::new(p.x, p.y).length() < 4.2);
+    }
+    assert!(s.q_good >= 0.8, "q share {}", s.q_good);
+}
+
 #[test]
 fn step_cap_gives_a_clean_error() {
     let (mesh, lp) = grid_with_hole(30, |c| (c - DVec3::new(15.0, 15.0, 0.0)).length() < 9.0);
@@ -702,7 +734,7 @@ fn bad_policy_is_an_error() {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 32, ..ProptestConfig::default() })]
     #[test]
     fn random_star_shaped_loops(radii in proptest::collection::vec(0.4f64..1.0, 5..14), rot in 0.0f64..std::f64::consts::TAU) {
         let n = radii.len();
@@ -723,6 +755,33 @@ proptest! {
                 for p in &patch.new_vertices {
                     prop_assert!(p.z.abs() < 1e-9);
                 }
+            }
+            Err(FillError::Failed(_)) => {}
+            Err(e) => prop_assert!(false, "unexpected {:?}", e),
+        }
+    }
+
+    /// Star-shaped loops on a wavy height field: a valid disk or a clean error.
+    #[test]
+    fn random_loops_on_a_wavy_surface(radii in proptest::collection::vec(0.4f64..1.0, 5..12), amp in 0.0f64..1.5, freq in 0.2f64..0.8) {
+        let n = radii.len();
+        let corners: Vec<DVec2> = radii
+            .iter()
+            .enumerate()
+            .map(|(i, r)| {
+                let a = 2.0 * PI * i as f64 / n as f64;
+                DVec2::new(a.cos(), a.sin()) * (r * 6.0)
+            })
+            .collect();
+        let poly = resample(&corners, 0.45);
+        let (mut mesh, lp) = planar_with_hole(&poly, 0.45, -8.0, 8.0);
+        for p in mesh.positions.iter_mut() {
+            p.z = amp * (freq * p.x).sin() * (freq * p.y).cos();
+        }
+        let (hole, r) = run(&mesh, &lp, &Policy::default());
+        match r {
+            Ok(patch) => {
+                validate(&mesh, &hole, &patch);
             }
             Err(FillError::Failed(_)) => {}
             Err(e) => prop_assert!(false, "unexpected {:?}", e),
