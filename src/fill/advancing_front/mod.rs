@@ -987,8 +987,8 @@ impl<'a> Builder<'a> {
                     let g = pair.map(|t| t.map(|i| self.pos[i as usize]));
                     let n0 = geom::tri_normal_raw(g[0][0], g[0][1], g[0][2]);
                     let n1 = geom::tri_normal_raw(g[1][0], g[1][1], g[1][2]);
-                    let same_side = n0.dot(n1) > 0.0;
-                    if !same_side {
+                    let unfolded = n0.dot(n1) > FOLD_COS * n0.length() * n1.length();
+                    if !unfolded {
                         continue;
                     }
                     if g.iter().any(|t| {

@@ -454,6 +454,64 @@ fn tiny_loops_three_and_four() {
     }
 }
 
+/// A quad hole whose one diagonal is already a mesh edge (on a triangular
+/// bipyramid with two faces around a polar edge removed): the other one is used.
+#[test]
+fn never_duplicates_a_mesh_edge_between_loop_vertices() {
+    let h = 3f64.sqrt() / 2.0;
+    let raw = RawMesh {
+        positions: vec![
+            DVec3::new(1.0, 0.0, 0.0),  // a
+            DVec3::new(-0.5, h, 0.0),   // b
+            DVec3::new(-0.5, -h, 0.0),  // c
+            DVec3::new(0.0, 0.0, 1.0),  // t
+            DVec3::new(0.0, 0.0, -1.0), // u
+        ],
+        // (a,b,t) and (b,c,t) removed
+        faces: vec![[2, 0, 3], [1, 0, 4], [2, 1, 4], [0, 2, 4]],
+        ..Default::default()
+    };
+    let (mesh, _) = Mesh::from_raw(&raw);
+    mesh.validate().unwrap();
+    let lp = mesh.topo.boundary_loops().pop().unwrap();
+    assert_eq!(lp.len(), 4);
+    let (hole, r) = run(&mesh, &lp, &Policy::default());
+    let patch = r.unwrap();
+    validate(&mesh, &hole, &patch);
+    let ids: Vec<u32> = patch
+        .triangles
+        .iter()
+        .flatten()
+        .map(|&i| lp[i as usize].0)
+        .collect();
+    // the diagonal b-t (1-3) is used, a-c (0-2) is not
+    let has = |x: u32, y: u32| {
+        patch.triangles.iter().any(|t| {
+            let v: Vec<u32> = t.iter().map(|&i| lp[i as usize].0).collect();
+            v.contains(&x) && v.contains(&y)
+        })
+    };
+    assert!(has(1, 3) && !has(0, 2), "{ids:?}");
+}
+
+/// Through the dispatcher: a large hole goes to the advancing front, whose patch
+/// passes the checks and is applied.
+#[test]
+fn dispatcher_fills_a_large_hole_with_the_front() {
+    use crate::check::Checker;
+    use crate::policy::Method;
+    use crate::report::HoleStatus;
+    let (mut mesh, lp) = grid_with_hole(30, |c| (c - DVec3::new(15.0, 15.0, 0.0)).length() < 9.0);
+    let policy = Policy::default();
+    let hole = Hole::new(0, &mesh, lp, &policy);
+    let mut checker = Checker::new(&mesh);
+    let rep = crate::fill::fill_hole(&mut mesh, &hole, &policy, &mut checker);
+    assert_eq!(rep.status, HoleStatus::Filled, "{}", rep.reason);
+    assert_eq!(rep.method, Some(Method::AdvancingFront));
+    mesh.validate().unwrap();
+    assert_eq!(mesh.topo.boundary_loops().len(), 1);
+}
+
 // ----- curved -----------------------------------------------------------------------
 
 /// The raw front follows the paper's placement: new vertices near the plane of the
