@@ -29,14 +29,18 @@
 //!   (uncorrected) normal. On a sphere of radius `R` with outward normals this is
 //!   `-1/R`.
 //! - **Placement (eqs. 9–10).** The new edge has length `l` = mean of the two front
-//!   edge lengths at `v_i` and lies in the plane spanned by `n_c` and the tangent
+//!   edge lengths at `v_i` (averaged with the size field, below) and lies in the plane spanned by `n_c` and the tangent
 //!   direction `t` (the bisector or trisector of `θ` in the tangent plane of `n_c`); its
 //!   angle `φ` to `n_c` is `cos φ = clamp(ω1 κ l/2 + ω2 s, -1, 1)`, where `s` is the
 //!   mean cosine between `n_c` and the two unit front edges (the slope of the front
 //!   against `n_c`; the paper's `n_cᵀ e'/|e'|²` term read as a dimensionless cosine). On
 //!   a sphere both terms equal `-l/(2R)`, which puts the new vertex on the sphere when
 //!   `n_c = n_i`. The new vertex is `v_o = v_i + l (cos φ n_c + sin φ t)` (the paper's
-//!   `v_o = e - v_i` is a typo).
+//!   `v_o = e - v_i` is a typo). Because `n_c` leans towards the hole's axis, new
+//!   vertices are placed below the tangent continuation of a convex surface: the raw
+//!   front flattens large curved holes (measured on a unit sphere: the largest radial
+//!   error is 0.66 of the flat cap's sag for a 58-vertex hole, 0.95 for a 204-vertex
+//!   one). That is the paper's design (converge fast); the fairing restores shape.
 //! - **Priority.** A binary heap keyed by `θ`, with lazy deletion. After a step only
 //!   the front vertices whose neighbours or normal changed are re-keyed; the wider
 //!   window of `n_e` makes other keys slightly stale, so a popped vertex is
@@ -49,7 +53,7 @@
 //!   one heap; a front of two vertices is closed, of three gets its last triangle.
 //! - **Validity.** A step is taken only if none of its triangles overlaps the patch
 //!   so far or the mesh near the hole (exact tri–tri tests on slightly shrunk
-//!   triangles, see [`intersect`]), none creates an edge that already exists (in the
+//!   triangles, see the `intersect` submodule), none creates an edge that already exists (in the
 //!   patch, or a mesh edge between two loop vertices), none has an angle below
 //!   `max(checks.min_angle_deg, 2°)`, none faces away from `n_c`, and none folds
 //!   back over the triangle behind the front edge it closes (> 120°). Otherwise the
@@ -64,10 +68,20 @@
 //!   hole needs about `k²/8` steps, so the default 200 steps per vertex limits round
 //!   holes to about 1,600 boundary vertices.
 //!
-//! After closing: an angle-improving edge-swap pass, and with `front.fair` a few
-//! iterations of umbrella smoothing of the new vertices (boundary fixed), then the
-//! swap pass again. The whole patch is verified against itself and the mesh at the
-//! end; a relaxed patch that fails is replaced by the unrelaxed one.
+//! After closing: an angle-improving edge-swap pass (max-min angle, never onto an
+//! existing edge, never folding a pair), then with `front.fair` the new vertices are
+//! faired and the swap pass runs again. The fairing is `relax`, a local stand-in with
+//! the signature of `fill::fair::fair_patch` (a few umbrella-smoothing iterations,
+//! the loop fixed); it keeps planar patches planar but does not restore curvature.
+//! The whole patch is verified against itself and the mesh at the end; a faired
+//! patch that fails is replaced by the unfaired one.
+//!
+//! Size field (a reading): the step length `l` is the mean of the two front edges
+//! (the paper) averaged with a size carried by the vertices (loop vertex: mean
+//! length of its mesh edges; new vertex: mean of the three front vertices it grew
+//! from). With the paper's length alone the front shrinks step after step (a 90°
+//! bisector step makes front edges 0.77 `l` long) and a round hole got six times
+//! too many vertices.
 
 mod improve;
 mod intersect;
@@ -96,6 +110,8 @@ const DIVERGE_FACTOR: usize = 4;
 /// Umbrella relaxation: iterations and step.
 const RELAX_ITERATIONS: usize = 8;
 const RELAX_LAMBDA: f64 = 0.5;
+/// Relaxation never creates an angle below this (degrees) unless it was smaller already.
+const RELAX_MIN_ANGLE_DEG: f64 = 0.5;
 /// Edge swaps: at most this many per patch triangle.
 const SWAPS_PER_TRIANGLE: usize = 10;
 
@@ -1150,17 +1166,38 @@ impl<'a> Builder<'a> {
         self.ctx.deadline.check()?;
         let mut candidates: Vec<(Vec<DVec3>, Vec<[u32; 3]>)> = Vec::new();
         if self.p.fair {
-            // Switch to `super::fair::fair_patch` here once it lands.
-            let mut pos = self.pos.clone();
+            // `relax` has the signature of `super::fair::fair_patch` (being written
+            // elsewhere); switch the call below to it once it lands.
+            let mut patch = Patch {
+                new_vertices: self.pos[k..].to_vec(),
+                triangles: tris.clone(),
+            };
             let t = std::time::Instant::now();
-            relax(&mut pos, k, &tris, rules.min_angle);
+            match relax(
+                self.ctx.mesh,
+                self.ctx.hole,
+                &mut patch,
+                &self.ctx.policy.fair,
+            ) {
+                Ok(()) if patch.new_vertices.len() == self.pos.len() - k => {
+                    let mut pos = self.pos.clone();
+                    pos[k..].copy_from_slice(&patch.new_vertices);
+                    let mut t2 = patch.triangles;
+                    improve::swap_edges(&pos, &mut t2, &rules, SWAPS_PER_TRIANGLE);
+                    candidates.push((pos, t2));
+                }
+                Ok(()) => {
+                    tracing::debug!("advancing front: fairing changed the vertex count; not used")
+                }
+                Err(FillError::Timeout) => return Err(FillError::Timeout),
+                Err(FillError::Failed(why)) => {
+                    tracing::debug!(%why, "advancing front: fairing failed; not used")
+                }
+            }
             tracing::debug!(
                 ms = t.elapsed().as_secs_f64() * 1e3,
-                "advancing front: relax"
+                "advancing front: fairing"
             );
-            let mut t2 = tris.clone();
-            improve::swap_edges(&pos, &mut t2, &rules, SWAPS_PER_TRIANGLE);
-            candidates.push((pos, t2));
         }
         candidates.push((self.pos.clone(), tris));
         candidates.push((self.pos.clone(), raw_tris));
@@ -1184,8 +1221,34 @@ impl<'a> Builder<'a> {
     }
 }
 
-/// Local stand-in for the patch fairing: umbrella smoothing of the new vertices with
-/// the loop fixed (see [`improve::relax`]).
-fn relax(pos: &mut [DVec3], k: usize, tris: &[[u32; 3]], min_angle: f64) {
-    improve::relax(pos, k, tris, RELAX_ITERATIONS, RELAX_LAMBDA, min_angle);
+/// Local stand-in for the patch fairing (`super::fair::fair_patch`, same signature):
+/// a few iterations of umbrella smoothing of the new vertices, the loop fixed (see
+/// [`improve::relax`]). `opts` is not used by the stand-in.
+fn relax(
+    mesh: &crate::mesh::Mesh,
+    hole: &super::Hole,
+    patch: &mut Patch,
+    _opts: &crate::policy::Fair,
+) -> Result<(), FillError> {
+    let k = hole.len();
+    let mut pos: Vec<DVec3> = hole.vertices.iter().map(|&v| mesh.pos(v)).collect();
+    pos.extend_from_slice(&patch.new_vertices);
+    if patch
+        .triangles
+        .iter()
+        .flatten()
+        .any(|&i| i as usize >= pos.len())
+    {
+        return failed("patch index out of range");
+    }
+    improve::relax(
+        &mut pos,
+        k,
+        &patch.triangles,
+        RELAX_ITERATIONS,
+        RELAX_LAMBDA,
+        RELAX_MIN_ANGLE_DEG.to_radians(),
+    );
+    patch.new_vertices.copy_from_slice(&pos[k..]);
+    Ok(())
 }

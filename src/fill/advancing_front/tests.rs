@@ -819,6 +819,27 @@ proptest! {
         }
     }
 
+    /// A hole in a noisy sphere (radial noise up to `noise`): a valid disk or a
+    /// clean error.
+    #[test]
+    fn noisy_sphere_hole(seed in 0u64..1000, noise in 0.0f64..0.02) {
+        use rand::{Rng, SeedableRng};
+        let (mut mesh, lp) = sphere_with_hole(4, 0.55);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        for p in mesh.positions.iter_mut() {
+            *p *= 1.0 + rng.random_range(-noise..=noise);
+        }
+        let (hole, r) = run(&mesh, &lp, &Policy::default());
+        match r {
+            Ok(patch) => {
+                let s = validate(&mesh, &hole, &patch);
+                prop_assert!(s.q_good > 0.5);
+            }
+            Err(FillError::Failed(_)) => {}
+            Err(e) => prop_assert!(false, "unexpected {:?}", e),
+        }
+    }
+
     /// Star-shaped loops on a wavy height field: a valid disk or a clean error.
     #[test]
     fn random_loops_on_a_wavy_surface(radii in proptest::collection::vec(0.4f64..1.0, 5..12), amp in 0.0f64..1.5, freq in 0.2f64..0.8) {
