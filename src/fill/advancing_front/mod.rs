@@ -904,7 +904,7 @@ impl<'a> Builder<'a> {
                 self.link(prev, n);
                 let total = self.front_size[f as usize] + m - 1; // -1 (x) + (m-1) new + 1 (w2)
                 let f2 = self.front_size.len() as u32;
-                let (small, size) = self.smaller_loop(w, w2);
+                let (small, size) = self.smaller_loop(w, w2)?;
                 let mut c = small;
                 loop {
                     self.nodes[c as usize].front = f2;
@@ -914,7 +914,10 @@ impl<'a> Builder<'a> {
                     }
                 }
                 self.front_size.push(size);
-                self.front_size[f as usize] = total - size;
+                self.front_size[f as usize] = match total.checked_sub(size) {
+                    Some(x) => x,
+                    None => return failed("internal: front sizes out of step"),
+                };
                 fronts.push(f2);
             }
         }
@@ -935,20 +938,19 @@ impl<'a> Builder<'a> {
 
     /// Walks the loops through `a` and `b` in turn; returns the start and size of the
     /// one that closes first (cost: twice the smaller size).
-    fn smaller_loop(&self, a: u32, b: u32) -> (u32, usize) {
+    fn smaller_loop(&self, a: u32, b: u32) -> Result<(u32, usize), FillError> {
         let (mut ca, mut cb) = (a, b);
-        let mut n = 0usize;
-        loop {
-            n += 1;
+        for n in 1..=self.nodes.len() {
             ca = self.nodes[ca as usize].next;
             if ca == a {
-                return (a, n);
+                return Ok((a, n));
             }
             cb = self.nodes[cb as usize].next;
             if cb == b {
-                return (b, n);
+                return Ok((b, n));
             }
         }
+        failed("internal: a front is not a closed loop")
     }
 
     fn front_nodes(&self, start: u32) -> Vec<u32> {

@@ -734,6 +734,72 @@ fn divergent_sphere_hole() {
     filled_or_clean_error("divergent sphere", &mesh, &lp);
 }
 
+/// Unit cube `[0, 1]³` with `n x n` cells per face, with the faces whose centroid is
+/// within `r` of the corner (1, 1, 1) removed.
+fn cube_with_corner_hole(n: usize, r: f64) -> (Mesh, Vec<VertexId>) {
+    let mut raw = RawMesh::default();
+    let mut index: std::collections::HashMap<(i64, i64, i64), u32> = Default::default();
+    let mut vid = |p: DVec3, raw: &mut RawMesh| -> u32 {
+        let key = (
+            (p.x * 1e6).round() as i64,
+            (p.y * 1e6).round() as i64,
+            (p.z * 1e6).round() as i64,
+        );
+        *index.entry(key).or_insert_with(|| {
+            raw.positions.push(p);
+            (raw.positions.len() - 1) as u32
+        })
+    };
+    // each face: origin, two axes (u x v points outwards)
+    let faces = [
+        (DVec3::new(1.0, 0.0, 0.0), DVec3::Y, DVec3::Z),
+        (DVec3::new(0.0, 0.0, 0.0), DVec3::Z, DVec3::Y),
+        (DVec3::new(0.0, 1.0, 0.0), DVec3::Z, DVec3::X),
+        (DVec3::new(0.0, 0.0, 0.0), DVec3::X, DVec3::Z),
+        (DVec3::new(0.0, 0.0, 1.0), DVec3::X, DVec3::Y),
+        (DVec3::new(0.0, 0.0, 0.0), DVec3::Y, DVec3::X),
+    ];
+    let corner = DVec3::ONE;
+    for (o, u, v) in faces {
+        for j in 0..n {
+            for i in 0..n {
+                let p =
+                    |a: usize, b: usize| o + u * (a as f64 / n as f64) + v * (b as f64 / n as f64);
+                let q = [p(i, j), p(i + 1, j), p(i + 1, j + 1), p(i, j + 1)];
+                for t in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
+                    let c = (t[0] + t[1] + t[2]) / 3.0;
+                    if (c - corner).length() < r {
+                        continue;
+                    }
+                    let f = [
+                        vid(t[0], &mut raw),
+                        vid(t[1], &mut raw),
+                        vid(t[2], &mut raw),
+                    ];
+                    raw.faces.push(f);
+                }
+            }
+        }
+    }
+    let (mesh, rep) = Mesh::from_raw(&raw);
+    assert_eq!(rep.flipped_faces, 0);
+    mesh.validate().unwrap();
+    let loops = mesh.topo.boundary_loops();
+    assert_eq!(loops.len(), 1);
+    (mesh, loops.into_iter().next().unwrap())
+}
+
+/// A hole over a cube corner: three faces meeting at right angles.
+#[test]
+fn cube_corner_hole() {
+    let (mesh, lp) = cube_with_corner_hole(24, 0.6);
+    assert!(lp.len() > 50, "loop of {}", lp.len());
+    assert!(
+        filled_or_clean_error("cube corner", &mesh, &lp),
+        "the corner should fill"
+    );
+}
+
 /// A hole in a height field `z = f(x, y)`; the patch stays within the range of the
 /// surface heights around the loop, widened by the amplitude.
 #[test]
