@@ -59,7 +59,10 @@
 //!   back over the triangle behind the front edge it closes (> 120°). Otherwise the
 //!   fallbacks are tried (ear, bisector, bisector merged into the nearest front
 //!   vertex); if none is valid the vertex is set aside until its neighbourhood changes.
-//!   When every front vertex is set aside the method fails.
+//!   When every front vertex is set aside, a front of at most 8 vertices is closed
+//!   around a new vertex at its centroid (if those triangles pass the same checks);
+//!   otherwise the method fails. A front of four vertices with no valid diagonal
+//!   tries the same centre vertex.
 //! - **Bounded.** At most `max_steps_per_vertex · k` steps (a step is one processed
 //!   front vertex, taken or set aside), the deadline is checked every step, and a
 //!   front that grows past `4k + 64` vertices is declared divergent (it spreads away
@@ -107,6 +110,9 @@ const BLOCKED: f64 = 10.0;
 /// The front has diverged when it holds more than this many times the loop's
 /// vertices (plus 64): it is spreading away instead of closing.
 const DIVERGE_FACTOR: usize = 4;
+/// A front of at most this many vertices on which every step failed is closed
+/// around a centre vertex when that is valid.
+const FAN_MAX: usize = 8;
 /// Umbrella relaxation: iterations and step.
 const RELAX_ITERATIONS: usize = 8;
 const RELAX_LAMBDA: f64 = 0.5;
@@ -1028,7 +1034,9 @@ impl<'a> Builder<'a> {
                     }
                 }
                 let Some((_, pair)) = best else {
-                    return Ok(()); // left to the main loop
+                    // no diagonal: a centre vertex, else left to the main loop
+                    self.close_fan(start);
+                    return Ok(());
                 };
                 for t in pair {
                     self.emit(t);
@@ -1039,6 +1047,57 @@ impl<'a> Builder<'a> {
             self.kill(c);
         }
         Ok(())
+    }
+
+    /// Closes the front through `start` with a new vertex at its centroid joined to
+    /// every front edge, if all those triangles pass the step checks. Returns whether
+    /// it did.
+    fn close_fan(&mut self, start: u32) -> bool {
+        let ns = self.front_nodes(start);
+        let m = ns.len();
+        if m < 3 || m != self.front_size[self.nodes[start as usize].front as usize] {
+            return false;
+        }
+        let vs: Vec<u32> = ns.iter().map(|&c| self.nodes[c as usize].v).collect();
+        let pts: Vec<DVec3> = vs.iter().map(|&v| self.pos[v as usize]).collect();
+        let c = geom::centroid(&pts);
+        let mut up = vs.iter().map(|&v| self.vnormal(v)).sum::<DVec3>();
+        if up == DVec3::ZERO {
+            up = geom::newell_normal(&pts);
+        }
+        let min_sin = self.p.min_angle.sin();
+        let mut geo = Vec::with_capacity(m);
+        for j in 0..m {
+            let t = [pts[j], pts[(j + 1) % m], c];
+            let nr = geom::tri_normal_raw(t[0], t[1], t[2]).normalize_or_zero();
+            let behind = self.nodes[ns[j] as usize].behind;
+            if improve::min_angle_sin(t[0], t[1], t[2]) < min_sin
+                || nr.dot(up) <= 0.0
+                || nr.dot(behind) < FOLD_COS
+            {
+                return false;
+            }
+            geo.push(t);
+        }
+        for (i, g) in geo.iter().enumerate() {
+            if self.obstacles.find_overlap(g, |_| false).is_some()
+                || geo[i + 1..].iter().any(|h| intersect::overlap(g, h))
+            {
+                return false;
+            }
+        }
+        let id = self.pos.len() as u32;
+        let size = vs.iter().map(|&v| self.size[v as usize]).sum::<f64>() / m as f64;
+        self.pos.push(c);
+        self.acc.push(DVec3::ZERO);
+        self.size.push(size);
+        for j in 0..m {
+            self.emit([vs[j], vs[(j + 1) % m], id]);
+        }
+        for n in ns {
+            self.kill(n);
+        }
+        true
     }
 
     fn rekey(&mut self, x: u32) {
@@ -1073,6 +1132,11 @@ impl<'a> Builder<'a> {
                 continue;
             }
             if nd.blocked {
+                // every vertex is set aside: close a small front around a centre vertex
+                let f = nd.front as usize;
+                if self.front_size[f] <= FAN_MAX && self.close_fan(e.node) {
+                    continue;
+                }
                 return failed(format!(
                     "the front is stuck: no valid step at any of its {} vertices",
                     self.alive

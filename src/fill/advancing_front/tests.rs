@@ -885,6 +885,28 @@ proptest! {
         }
     }
 
+    /// Any policy in range: a valid disk or a clean error, on a curved loop.
+    #[test]
+    fn random_policies(alpha in 0.0f64..=1.0, omega1 in 0.0f64..=1.0, merge in 0.0f64..1.0,
+                       small in 30.0f64..100.0, extra in 0.0f64..80.0, fair in proptest::bool::ANY) {
+        let (mesh, lp) = sphere_with_hole(4, 0.5);
+        let mut policy = Policy::default();
+        policy.front.alpha = alpha;
+        policy.front.omega1 = omega1;
+        policy.front.merge_distance = merge;
+        policy.front.angle_small = small;
+        policy.front.angle_large = small + extra;
+        policy.front.fair = fair;
+        let (hole, r) = run(&mesh, &lp, &policy);
+        match r {
+            Ok(patch) => {
+                validate(&mesh, &hole, &patch);
+            }
+            Err(FillError::Failed(_)) => {}
+            Err(e) => prop_assert!(false, "unexpected {:?}", e),
+        }
+    }
+
     /// A hole in a noisy sphere (radial noise up to `noise`): a valid disk or a
     /// clean error.
     #[test]
