@@ -822,6 +822,54 @@ fn saddle_hole() {
     assert!(s.q_good >= 0.8, "q share {}", s.q_good);
 }
 
+/// A zero-area slit (a cut along a grid line): no valid patch exists, so a clean
+/// error.
+#[test]
+fn slit_gives_a_clean_error() {
+    let n = 8;
+    let mut raw = RawMesh::default();
+    for j in 0..=n {
+        for i in 0..=n {
+            raw.positions.push(DVec3::new(i as f64, j as f64, 0.0));
+        }
+    }
+    let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
+    // copies of (2..=6, 4) for the faces above the cut
+    let base = raw.positions.len() as u32;
+    for i in 2..=6 {
+        raw.positions.push(DVec3::new(i as f64, 4.0, 0.0));
+    }
+    for j in 0..n {
+        for i in 0..n {
+            for f in [[id(i, j), id(i + 1, j), id(i + 1, j + 1)], [id(i, j), id(i + 1, j + 1), id(i, j + 1)]] {
+                let c = f.iter().map(|&v| raw.positions[v as usize]).sum::<DVec3>() / 3.0;
+                let f = f.map(|v| {
+                    let (vi, vj) = (v as usize % (n + 1), v as usize / (n + 1));
+                    if c.y > 4.0 && vj == 4 && (2..=6).contains(&vi) {
+                        base + (vi - 2) as u32
+                    } else {
+                        v
+                    }
+                });
+                raw.faces.push(f);
+            }
+        }
+    }
+    let (mesh, _) = Mesh::from_raw(&raw);
+    mesh.validate().unwrap();
+    let lp = mesh.topo.boundary_loops().into_iter().find(|l| l.len() != 4 * n).unwrap();
+    assert_eq!(lp.len(), 12);
+    let (hole, r) = run(&mesh, &lp, &Policy::default());
+    match r {
+        Err(FillError::Failed(why)) => eprintln!("slit: {why}"),
+        Ok(patch) => {
+            // only acceptable if it passes every check
+            validate(&mesh, &hole, &patch);
+        }
+        Err(e) => panic!("unexpected {e:?}"),
+    }
+}
+
 #[test]
 fn step_cap_gives_a_clean_error() {
     let (mesh, lp) = grid_with_hole(30, |c| (c - DVec3::new(15.0, 15.0, 0.0)).length() < 9.0);
