@@ -841,7 +841,10 @@ fn slit_gives_a_clean_error() {
     }
     for j in 0..n {
         for i in 0..n {
-            for f in [[id(i, j), id(i + 1, j), id(i + 1, j + 1)], [id(i, j), id(i + 1, j + 1), id(i, j + 1)]] {
+            for f in [
+                [id(i, j), id(i + 1, j), id(i + 1, j + 1)],
+                [id(i, j), id(i + 1, j + 1), id(i, j + 1)],
+            ] {
                 let c = f.iter().map(|&v| raw.positions[v as usize]).sum::<DVec3>() / 3.0;
                 let f = f.map(|v| {
                     let (vi, vj) = (v as usize % (n + 1), v as usize / (n + 1));
@@ -857,7 +860,12 @@ fn slit_gives_a_clean_error() {
     }
     let (mesh, _) = Mesh::from_raw(&raw);
     mesh.validate().unwrap();
-    let lp = mesh.topo.boundary_loops().into_iter().find(|l| l.len() != 4 * n).unwrap();
+    let lp = mesh
+        .topo
+        .boundary_loops()
+        .into_iter()
+        .find(|l| l.len() != 4 * n)
+        .unwrap();
     assert_eq!(lp.len(), 12);
     let (hole, r) = run(&mesh, &lp, &Policy::default());
     match r {
