@@ -73,9 +73,10 @@
 //!
 //! After closing: an angle-improving edge-swap pass (max-min angle, never onto an
 //! existing edge, never folding a pair), then with `front.fair` the new vertices are
-//! faired and the swap pass runs again. The fairing is `relax`, a local stand-in with
-//! the signature of `fill::fair::fair_patch` (a few umbrella-smoothing iterations,
-//! the loop fixed); it keeps planar patches planar but does not restore curvature.
+//! relaxed (a few umbrella-smoothing iterations, the loop fixed, which evens out the
+//! triangles), then faired by `fill::fair::fair_patch` (the `[fair]` policy: the
+//! bi-Laplacian by default), which restores the curvature the raw front flattens,
+//! and the swap pass runs again.
 //! The whole patch is verified against itself and the mesh at the end; a faired
 //! patch that fails is replaced by the unfaired one.
 //!
@@ -1232,19 +1233,28 @@ impl<'a> Builder<'a> {
         self.ctx.deadline.check()?;
         let mut candidates: Vec<(Vec<DVec3>, Vec<[u32; 3]>)> = Vec::new();
         if self.p.fair {
-            // `relax` has the signature of `super::fair::fair_patch` (being written
-            // elsewhere); switch the call below to it once it lands.
+            // umbrella relaxation evens out the triangles, then the fairing solve
+            // (`fill::fair`, the `[fair]` policy) gives the patch its shape
             let mut patch = Patch {
                 new_vertices: self.pos[k..].to_vec(),
                 triangles: tris.clone(),
             };
             let t = std::time::Instant::now();
-            match relax(
+            let faired = relax(
                 self.ctx.mesh,
                 self.ctx.hole,
                 &mut patch,
                 &self.ctx.policy.fair,
-            ) {
+            )
+            .and_then(|()| {
+                super::fair::fair_patch(
+                    self.ctx.mesh,
+                    self.ctx.hole,
+                    &mut patch,
+                    &self.ctx.policy.fair,
+                )
+            });
+            match faired {
                 Ok(()) if patch.new_vertices.len() == self.pos.len() - k => {
                     let mut pos = self.pos.clone();
                     pos[k..].copy_from_slice(&patch.new_vertices);
@@ -1287,9 +1297,8 @@ impl<'a> Builder<'a> {
     }
 }
 
-/// Local stand-in for the patch fairing (`super::fair::fair_patch`, same signature):
-/// a few iterations of umbrella smoothing of the new vertices, the loop fixed (see
-/// [`improve::relax`]). `opts` is not used by the stand-in.
+/// A few iterations of umbrella smoothing of the new vertices, the loop fixed (see
+/// [`improve::relax`]), before the fairing solve.
 fn relax(
     mesh: &crate::mesh::Mesh,
     hole: &super::Hole,
