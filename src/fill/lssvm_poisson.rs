@@ -63,7 +63,7 @@ pub const RELAX_ITERATIONS: usize = 5;
 /// Factor of each umbrella step.
 pub const RELAX_FACTOR: f64 = 0.5;
 /// Largest training set (the dense LS-SVM system is `(l+1)²`).
-pub const MAX_SAMPLES: usize = 1500;
+pub const MAX_SAMPLES: usize = 1000;
 /// Smallest angle of a front triangle, in degrees.
 const FRONT_MIN_ANGLE_DEG: f64 = 2.0;
 /// Uniform fallback weight: `cot α + cot β` on a regular triangulation.
@@ -96,16 +96,131 @@ pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
             xs.len()
         )));
     }
-    let model = LssvmModel::fit(&xs, &ys, opts.gamma, opts.kernel_width * l)?;
+    let sigma = kernel_sigma(opts, ctx.hole);
+    let model = LssvmModel::fit(&xs, &ys, opts.gamma, sigma)?;
+    let dmax = clamp_length(&ys);
+    let ring = Ring::new(ctx.mesh, &ctx.hole.vertices);
+    let boundary_normals: Vec<DVec3> = ctx.hole.vertices.iter().map(|&v| ctx.mesh.vertex_normal(v)).collect();
     ctx.deadline.check()?;
     for _ in 0..opts.iterations {
         let pos: Vec<DVec3> = boundary.iter().chain(patch.new_vertices.iter()).copied().collect();
-        let target: Vec<DVec3> = patch.new_vertices.iter().map(|&x| model.predict(x)).collect();
+        let normals = vertex_normals(&pos, k, &patch.triangles);
+        let target: Vec<DVec3> = patch
+            .new_vertices
+            .iter()
+            .zip(&normals)
+            .chain(boundary.iter().zip(&boundary_normals))
+            .map(|(&x, &n)| (n * model.predict(x).dot(n)).clamp_length_max(dmax))
+            .collect();
         ctx.deadline.check()?;
-        patch.new_vertices = solve_poisson(&pos, k, &patch.triangles, &target, l)?;
+        let solver = PoissonSolver::new(&pos, k, &patch.triangles, l, Some(&ring))?;
+        let mut accepted = None;
+        for scale in PREDICTION_SCALES {
+            let scale = if std::env::var("MEMBRANE").is_ok() { 0.0 } else { scale };
+            let t: Vec<DVec3> = target.iter().map(|d| *d * scale).collect();
+            let x = solver.solve(&boundary, &t)?;
+            if is_sound(&boundary, &patch.new_vertices, &x, &patch.triangles) {
+                if std::env::var("LSSVM_DEBUG").is_ok() { eprintln!("accepted scale {scale}"); }
+                accepted = Some(x);
+                break;
+            }
+            tracing::debug!(hole = ctx.hole.id, scale, "lssvm_poisson: solution folds, damping the prediction");
+        }
+        match accepted {
+            Some(x) => patch.new_vertices = x,
+            None => break,
+        }
         ctx.deadline.check()?;
     }
     Ok(patch)
+}
+
+/// Area-weighted normals of the new vertices of a patch (`pos`: loop first, `k` of them).
+fn vertex_normals(pos: &[DVec3], k: usize, triangles: &[[u32; 3]]) -> Vec<DVec3> {
+    let mut acc = vec![DVec3::ZERO; pos.len().saturating_sub(k)];
+    for t in triangles {
+        let [a, b, c] = t.map(|i| pos[i as usize]);
+        let n = geom::tri_normal_raw(a, b, c);
+        for &i in t {
+            if i as usize >= k {
+                acc[i as usize - k] += n;
+            }
+        }
+    }
+    acc.into_iter().map(|n| n.normalize_or_zero()).collect()
+}
+
+/// The largest length allowed for a predicted Laplacian: the [`CLAMP_QUANTILE`] quantile
+/// of the training Laplacians' lengths (spikes on creases do not set the bound).
+fn clamp_length(ys: &[DVec3]) -> f64 {
+    let mut len: Vec<f64> = ys.iter().map(|d| d.length()).collect();
+    len.sort_by(f64::total_cmp);
+    if len.is_empty() {
+        return 0.0;
+    }
+    let i = ((len.len() - 1) as f64 * CLAMP_QUANTILE).round() as usize;
+    len[i.min(len.len() - 1)]
+}
+
+/// See [`clamp_length`].
+pub const CLAMP_QUANTILE: f64 = 0.9;
+
+/// Factors applied to the predicted Laplacian when a Poisson solution folds (the last,
+/// 0, is the membrane); when every one folds the previous geometry is kept.
+pub const PREDICTION_SCALES: [f64; 4] = [1.0, 0.5, 0.25, 0.0];
+/// Smallest angle of a solved patch triangle, in degrees.
+const SOUND_MIN_ANGLE_DEG: f64 = 1.0;
+
+/// A solved patch is sound when no triangle is thinner than [`SOUND_MIN_ANGLE_DEG`] and
+/// none turned by more than 90° from the geometry it was solved on (`old`).
+fn is_sound(boundary: &[DVec3], old: &[DVec3], new: &[DVec3], triangles: &[[u32; 3]]) -> bool {
+    let k = boundary.len();
+    let at = |v: &[DVec3], i: u32| {
+        let i = i as usize;
+        if i < k {
+            boundary[i]
+        } else {
+            v[i - k]
+        }
+    };
+    let min = SOUND_MIN_ANGLE_DEG.to_radians();
+    triangles.iter().all(|t| {
+        let [a, b, c] = t.map(|i| at(new, i));
+        let [a0, b0, c0] = t.map(|i| at(old, i));
+        let n = geom::tri_normal_raw(a, b, c);
+        n.dot(geom::tri_normal_raw(a0, b0, c0)) > 0.0 && geom::angles(a, b, c).iter().all(|&x| x >= min)
+    })
+}
+
+/// Guide normal field over the hole: inverse-square-distance mean of the loop's vertex
+/// normals. It does not depend on the patch, so it cannot drift with it.
+struct Guide {
+    pts: Vec<DVec3>,
+    normals: Vec<DVec3>,
+    eps2: f64,
+}
+
+impl Guide {
+    fn new(mesh: &Mesh, hole: &[VertexId], edge: f64) -> Guide {
+        Guide {
+            pts: hole.iter().map(|&v| mesh.pos(v)).collect(),
+            normals: hole.iter().map(|&v| mesh.vertex_normal(v)).collect(),
+            eps2: 1e-3 * edge * edge,
+        }
+    }
+
+    fn at(&self, x: DVec3) -> DVec3 {
+        let mut acc = DVec3::ZERO;
+        for (p, n) in self.pts.iter().zip(&self.normals) {
+            acc += *n / (x - *p).length_squared().max(self.eps2);
+        }
+        acc.normalize_or_zero()
+    }
+}
+
+/// The RBF width: `kernel_width` times the loop's radius `perimeter / 2π`.
+pub fn kernel_sigma(opts: &crate::policy::Lssvm, hole: &super::Hole) -> f64 {
+    opts.kernel_width * hole.perimeter / std::f64::consts::TAU
 }
 
 // ---------------------------------------------------------------------------
@@ -127,8 +242,59 @@ pub fn initial_front(
     if !(edge.is_finite() && edge > 0.0) {
         return Err(FillError::Failed("front edge length is not positive".into()));
     }
-    let mut f = Front::new(mesh, hole, edge, merge_distance);
+    match run_front(Front::new(mesh, hole, edge, merge_distance, false), k, deadline) {
+        Err(FillError::Failed(why3d)) => {
+            // the same front in the loop's best-fit plane, lifted by a harmonic map
+            let flat = run_front(Front::new(mesh, hole, edge, merge_distance, true), k, deadline)
+                .map_err(|e| match e {
+                    FillError::Failed(why) => FillError::Failed(format!("{why3d}; in the plane: {why}")),
+                    t => t,
+                })?;
+            let boundary: Vec<DVec3> = hole.iter().map(|&v| mesh.pos(v)).collect();
+            let pts = project_loop(&boundary).ok_or_else(|| FillError::Failed(why3d.clone()))?;
+            let pos: Vec<DVec3> = pts.into_iter().chain(flat.new_vertices.iter().copied()).collect();
+            let solver = PoissonSolver::new(&pos, k, &flat.triangles, edge, None)?;
+            let zero = vec![DVec3::ZERO; flat.new_vertices.len()];
+            let new_vertices = solver.solve(&boundary, &zero)?;
+            Ok(Patch {
+                new_vertices,
+                triangles: flat.triangles,
+            })
+        }
+        other => other,
+    }
+}
+
+/// The loop projected onto its best-fit (Newell) plane, as points with `z = 0`, when
+/// that projection is a simple polygon.
+fn project_loop(pts: &[DVec3]) -> Option<Vec<DVec3>> {
+    let n = geom::newell_normal(pts);
+    if n == DVec3::ZERO {
+        return None;
+    }
+    let t1 = n.any_orthonormal_vector();
+    let t2 = n.cross(t1);
+    let q: Vec<(f64, f64)> = pts.iter().map(|p| (p.dot(t1), p.dot(t2))).collect();
+    let m = q.len();
+    for a in 0..m {
+        for b in a + 2..m {
+            if a == 0 && b == m - 1 {
+                continue;
+            }
+            if segments_cross(q[a], q[(a + 1) % m], q[b], q[(b + 1) % m]) {
+                return None;
+            }
+        }
+    }
+    Some(q.into_iter().map(|(x, y)| DVec3::new(x, y, 0.0)).collect())
+}
+
+/// Runs a front until every loop is closed.
+fn run_front(front: Option<Front>, k: usize, deadline: &super::Deadline) -> Result<Patch, FillError> {
+    let mut f = front.ok_or_else(|| FillError::Failed("the loop's projection is not a simple polygon".into()))?;
     let cap = k * k + 100 * k + 1000;
+    // twice the vertex count of the largest disk with this perimeter, plus slack
+    let vertex_cap = k + k * k / 2 + 10 * k;
     let mut steps = 0usize;
     let mut loops: Vec<Vec<u32>> = vec![(0..k as u32).collect()];
     while let Some(lp) = loops.pop() {
@@ -143,6 +309,12 @@ pub fn initial_front(
         if lp.len() == 3 {
             f.add_triangles(&[[lp[0], lp[1], lp[2]]]);
             continue;
+        }
+        if f.pos.len() > vertex_cap {
+            return Err(FillError::Failed(format!(
+                "advancing front created more than {} vertices",
+                vertex_cap - k
+            )));
         }
         let mut next = f.step(&lp)?;
         loops.append(&mut next);
@@ -172,8 +344,38 @@ struct Front {
     tris: Vec<[u32; 3]>,
     /// Undirected edges (min, max) of the patch and mesh edges between loop vertices.
     edges: HashSet<(u32, u32)>,
+    /// Triangles a new triangle must not overlap: the mesh faces around the loop and
+    /// the patch so far (vertex labels: patch indices; other mesh vertices get labels
+    /// from `u32::MAX` down, so that they never match).
+    obstacles: Vec<Obstacle>,
+    /// Centroid and largest distance of the loop's vertices from it: new vertices stay
+    /// within `1.2` times that ball.
+    centre: DVec3,
+    reach: f64,
     edge: f64,
     merge: f64,
+    /// Guide normals (see [`Guide`]): a front that starts to turn over is refused.
+    guide: Guide,
+    /// Front edges and obstacles farther than this from a step's vertex are not tested.
+    radius: f64,
+}
+
+struct Obstacle {
+    ids: [u32; 3],
+    pts: [DVec3; 3],
+    centre: DVec3,
+    normal: DVec3,
+}
+
+impl Obstacle {
+    fn new(ids: [u32; 3], pts: [DVec3; 3]) -> Obstacle {
+        Obstacle {
+            ids,
+            pts,
+            centre: (pts[0] + pts[1] + pts[2]) / 3.0,
+            normal: geom::tri_normal_raw(pts[0], pts[1], pts[2]).normalize_or_zero(),
+        }
+    }
 }
 
 fn ukey(a: u32, b: u32) -> (u32, u32) {
@@ -181,13 +383,19 @@ fn ukey(a: u32, b: u32) -> (u32, u32) {
 }
 
 impl Front {
-    fn new(mesh: &Mesh, hole: &[VertexId], edge: f64, merge_distance: f64) -> Front {
+    /// The front of the loop `hole`; with `planar`, of its projection onto its best-fit
+    /// plane (`None` when that is not a simple polygon).
+    fn new(mesh: &Mesh, hole: &[VertexId], edge: f64, merge_distance: f64, planar: bool) -> Option<Front> {
         let k = hole.len();
-        let pos: Vec<DVec3> = hole.iter().map(|&v| mesh.pos(v)).collect();
-        let nacc = hole
+        let mut pos: Vec<DVec3> = hole.iter().map(|&v| mesh.pos(v)).collect();
+        let mut nacc: Vec<DVec3> = hole
             .iter()
             .map(|&v| mesh.topo.vertex_faces(v).map(|f| mesh.face_normal_raw(f)).sum::<DVec3>())
             .collect();
+        if planar {
+            pos = project_loop(&pos)?;
+            nacc = vec![DVec3::Z; k];
+        }
         let mut index = std::collections::HashMap::new();
         for (i, &v) in hole.iter().enumerate() {
             index.insert(v, i as u32);
@@ -201,18 +409,60 @@ impl Front {
             }
             edges.insert(ukey(i as u32, ((i + 1) % k) as u32));
         }
-        Front {
+        let mut obstacles = Vec::new();
+        let mut seen = HashSet::new();
+        if planar {
+            // the loop is the only obstacle; every front edge is checked
+            seen.extend((0..mesh.num_faces()).map(crate::mesh::FaceId::from_idx));
+        }
+        let mut other: std::collections::HashMap<VertexId, u32> = std::collections::HashMap::new();
+        for &v in hole {
+            for f in mesh.topo.vertex_faces(v) {
+                if !seen.insert(f) {
+                    continue;
+                }
+                let t = mesh.topo.face(f);
+                let ids = t.map(|w| match index.get(&w) {
+                    Some(&i) => i,
+                    None => {
+                        let next = u32::MAX - other.len() as u32;
+                        *other.entry(w).or_insert(next)
+                    }
+                });
+                obstacles.push(Obstacle::new(ids, t.map(|w| mesh.pos(w))));
+            }
+        }
+        let centre = geom::centroid(&pos);
+        let reach = 1.2 * pos.iter().map(|p| (*p - centre).length()).fold(0.0, f64::max) + edge;
+        let guide = if planar {
+            Guide {
+                pts: vec![DVec3::ZERO],
+                normals: vec![DVec3::Z],
+                eps2: 1.0,
+            }
+        } else {
+            Guide::new(mesh, hole, edge)
+        };
+        Some(Front {
             pos,
             nacc,
             tris: Vec::new(),
             edges,
+            obstacles,
+            centre,
+            reach,
+            guide,
+            radius: if planar { f64::INFINITY } else { 4.0 * edge },
             edge,
             merge: merge_distance * edge,
-        }
+        })
     }
 
+    /// The normal at patch vertex `i`: its own (area-weighted over the mesh and patch
+    /// triangles around it) averaged with the guide normal at its position.
     fn normal(&self, i: u32) -> DVec3 {
-        self.nacc[i as usize].normalize_or_zero()
+        let g = self.guide.at(self.pos[i as usize]);
+        (self.nacc[i as usize].normalize_or_zero() + g).normalize_or(g)
     }
 
     fn add_triangles(&mut self, tris: &[[u32; 3]]) {
@@ -223,6 +473,7 @@ impl Front {
                 self.edges.insert(ukey(t[c], t[(c + 1) % 3]));
             }
             self.tris.push(*t);
+            self.obstacles.push(Obstacle::new(*t, t.map(|i| self.pos[i as usize])));
         }
     }
 
@@ -240,16 +491,11 @@ impl Front {
         if th < 0.0 {
             th += std::f64::consts::TAU;
         }
+        // the plane of the two front edges, unless they are nearly collinear or their
+        // plane nearly contains the normal: then the tangent plane
         let cl = c.length();
-        let axis = if cl > 1e-6 {
-            if c.dot(n) >= 0.0 {
-                c / cl
-            } else {
-                -c / cl
-            }
-        } else {
-            n
-        };
+        let ch = if c.dot(n) >= 0.0 { c } else { -c };
+        let axis = if cl > 0.5 && ch.dot(n) > 0.5 * cl { ch / cl } else { n };
         (th, axis, u)
     }
 
@@ -284,9 +530,61 @@ impl Front {
                 }
             }
         }
-        Err(FillError::Failed(format!(
-            "advancing front is stuck on a loop of {m} vertices"
-        )))
+        // every rule refused: clip the best ear of the loop's projection
+        self.clip_ear(lp).ok_or_else(|| {
+            FillError::Failed(format!("advancing front is stuck on a loop of {m} vertices"))
+        })
+    }
+
+    /// Fallback when no front rule applies: project the loop onto its best-fit plane
+    /// (Newell normal) and, when the projection is a simple polygon, cut off the ear
+    /// with the largest smallest angle whose new edge is not an existing edge.
+    fn clip_ear(&mut self, lp: &[u32]) -> Option<Vec<Vec<u32>>> {
+        let m = lp.len();
+        let pts: Vec<DVec3> = lp.iter().map(|&v| self.pos[v as usize]).collect();
+        let n = geom::newell_normal(&pts);
+        if n == DVec3::ZERO {
+            return None;
+        }
+        let t1 = n.any_orthonormal_vector();
+        let t2 = n.cross(t1);
+        let q: Vec<(f64, f64)> = pts.iter().map(|p| (p.dot(t1), p.dot(t2))).collect();
+        // simple polygon?
+        for a in 0..m {
+            for b in a + 2..m {
+                if a == 0 && b == m - 1 {
+                    continue;
+                }
+                if segments_cross(q[a], q[(a + 1) % m], q[b], q[(b + 1) % m]) {
+                    return None;
+                }
+            }
+        }
+        let mut best: Option<(f64, usize)> = None;
+        for j in 0..m {
+            let (i0, i2) = ((j + m - 1) % m, (j + 1) % m);
+            // convex corner: the loop runs counter-clockwise about n
+            if orient2(q[i0], q[j], q[i2]) <= 0.0 {
+                continue;
+            }
+            if self.edges.contains(&ukey(lp[i0], lp[i2])) {
+                continue;
+            }
+            if (0..m).any(|t| t != i0 && t != j && t != i2 && point_in_triangle(q[t], q[i0], q[j], q[i2])) {
+                continue;
+            }
+            let a = geom::angles(pts[i0], pts[j], pts[i2]);
+            let score = a[0].min(a[1]).min(a[2]);
+            if best.is_none_or(|(bs, _)| score > bs) {
+                best = Some((score, j));
+            }
+        }
+        let (_, j) = best?;
+        let (prev, next) = (lp[(j + m - 1) % m], lp[(j + 1) % m]);
+        self.add_triangles(&[[prev, lp[j], next]]);
+        let mut rest = lp.to_vec();
+        rest.remove(j);
+        Some(split_loops(rest))
     }
 
     /// Tries the step at `lp[j]` with spokes at the rotations `rots` of `u` about `axis`
@@ -306,6 +604,9 @@ impl Front {
         for &r in rots {
             let d = DQuat::from_axis_angle(axis, r) * ut;
             let q = p + d * self.edge;
+            if (q - self.centre).length() > self.reach {
+                return None;
+            }
             let mut best: Option<(f64, u32)> = None;
             for &v in lp {
                 if v == pi {
@@ -369,7 +670,7 @@ impl Front {
             }
             let [x, y, z] = t.map(at);
             let nt = geom::tri_normal_raw(x, y, z);
-            if !(nt.dot(n) > 0.0) {
+            if !(nt.dot(n) > 0.0) || !(nt.dot(self.guide.at((x + y + z) / 3.0)) > 0.0) {
                 return None;
             }
             let angs = geom::angles(x, y, z);
@@ -384,7 +685,7 @@ impl Front {
             let d = x - p;
             (d.dot(t1), d.dot(t2))
         };
-        let radius = 4.0 * self.edge;
+        let radius = self.radius;
         let near = |x: DVec3| (x - p).length() <= radius;
         for &(a, b) in &new_edges {
             let (pa, pb) = (at(a), at(b));
@@ -432,6 +733,19 @@ impl Front {
                     if segments_cross((0.0, 0.0), pq, proj(pc), proj(pd)) {
                         return None;
                     }
+                }
+            }
+        }
+        // no overlap with the patch so far or the mesh around the loop
+        for t in &tris {
+            let pts = t.map(at);
+            let pq = pts.map(proj);
+            for o in &self.obstacles {
+                if (o.centre - p).length() > radius || o.normal.dot(n) < 0.2 {
+                    continue;
+                }
+                if overlap2d(t, &pq, &o.ids, &o.pts.map(proj)) {
+                    return None;
                 }
             }
         }
@@ -484,6 +798,54 @@ fn split_loops(seq: Vec<u32>) -> Vec<Vec<u32>> {
         }
     }
     out
+}
+
+/// Interior overlap of two projected triangles given with their vertex labels (shared
+/// labels are the same vertex).
+fn overlap2d(ta: &[u32; 3], pa: &[(f64, f64); 3], tb: &[u32; 3], pb: &[(f64, f64); 3]) -> bool {
+    let shared: Vec<(usize, usize)> = (0..3)
+        .flat_map(|i| (0..3).map(move |j| (i, j)))
+        .filter(|&(i, j)| ta[i] == tb[j])
+        .collect();
+    match shared.len() {
+        3 => return true,
+        2 => {
+            // same side of the shared edge?
+            let (i0, j0) = shared[0];
+            let (i1, _) = shared[1];
+            let ia = 3 - i0 - i1;
+            let jb = (0..3).find(|&j| j != j0 && j != shared[1].1).unwrap_or(0);
+            let e0 = pa[i0];
+            let e1 = pa[i1];
+            let sa = orient2(e0, e1, pa[ia]);
+            let sb = orient2(e0, e1, pb[jb]);
+            return sa * sb > 0.0;
+        }
+        _ => {}
+    }
+    for i in 0..3 {
+        for j in 0..3 {
+            let (a0, a1) = (ta[i], ta[(i + 1) % 3]);
+            let (b0, b1) = (tb[j], tb[(j + 1) % 3]);
+            if a0 == b0 || a0 == b1 || a1 == b0 || a1 == b1 {
+                continue;
+            }
+            if segments_cross(pa[i], pa[(i + 1) % 3], pb[j], pb[(j + 1) % 3]) {
+                return true;
+            }
+        }
+    }
+    for i in 0..3 {
+        if !tb.contains(&ta[i]) && point_in_triangle(pa[i], pb[0], pb[1], pb[2]) {
+            return true;
+        }
+    }
+    for j in 0..3 {
+        if !ta.contains(&tb[j]) && point_in_triangle(pb[j], pa[0], pa[1], pa[2]) {
+            return true;
+        }
+    }
+    false
 }
 
 fn orient2(a: (f64, f64), b: (f64, f64), c: (f64, f64)) -> f64 {
@@ -641,8 +1003,9 @@ pub fn training_set(mesh: &Mesh, hole: &[VertexId], rings: usize) -> (Vec<DVec3>
             })
             .collect();
         if let Some((d, _, _)) = cot_laplacian(p, &fan) {
+            let n = mesh.vertex_normal(v);
             xs.push(p);
-            ys.push(d);
+            ys.push(n * d.dot(n));
         }
     }
     (xs, ys)
@@ -687,27 +1050,30 @@ impl LssvmModel {
             2 => ys[i].y,
             _ => ys[i].z,
         });
-        let sol = llt.solve(&rhs);
-        let s_eta: f64 = (0..l).map(|i| sol[(i, 0)]).sum();
+        let x = llt.solve(&rhs);
+        let sol: Vec<[f64; 4]> = (0..l).map(|i| [x[(i, 0)], x[(i, 1)], x[(i, 2)], x[(i, 3)]]).collect();
+        Self::from_solution(xs, &sol, inv2s2).ok_or_else(|| FillError::Failed("LS-SVM system is singular".into()))
+    }
+
+    /// The model from the solutions `[η, ν_x, ν_y, ν_z]` of `H X = [1, y]`.
+    fn from_solution(xs: &[DVec3], sol: &[[f64; 4]], inv2s2: f64) -> Option<LssvmModel> {
+        let s_eta: f64 = sol.iter().map(|r| r[0]).sum();
         if !(s_eta.abs() > 0.0) || !s_eta.is_finite() {
-            return Err(FillError::Failed("LS-SVM system is singular".into()));
+            return None;
         }
-        let mut bias = [0.0; 3];
-        for (d, b) in bias.iter_mut().enumerate() {
-            let s: f64 = (0..l).map(|i| sol[(i, d + 1)]).sum();
-            *b = s / s_eta;
-        }
-        let bias = DVec3::from_array(bias);
-        let alpha: Vec<DVec3> = (0..l)
-            .map(|i| {
-                let eta = sol[(i, 0)];
-                DVec3::new(sol[(i, 1)], sol[(i, 2)], sol[(i, 3)]) - bias * eta
-            })
+        let bias = DVec3::new(
+            sol.iter().map(|r| r[1]).sum::<f64>() / s_eta,
+            sol.iter().map(|r| r[2]).sum::<f64>() / s_eta,
+            sol.iter().map(|r| r[3]).sum::<f64>() / s_eta,
+        );
+        let alpha: Vec<DVec3> = sol
+            .iter()
+            .map(|r| DVec3::new(r[1], r[2], r[3]) - bias * r[0])
             .collect();
         if !bias.is_finite() || alpha.iter().any(|a| !a.is_finite()) {
-            return Err(FillError::Failed("LS-SVM solution is not finite".into()));
+            return None;
         }
-        Ok(LssvmModel {
+        Some(LssvmModel {
             xs: xs.to_vec(),
             alpha,
             bias,
@@ -728,41 +1094,116 @@ impl LssvmModel {
 // ---------------------------------------------------------------------------
 // 4. Poisson
 
-/// The factored Poisson system of a patch: rows of the new vertices, loop vertices as
-/// Dirichlet values. Factor once, solve for any target Laplacian field.
+/// Labels of mesh vertices outside the patch in a [`Ring`] start here.
+const EXT: u32 = u32::MAX / 2;
+
+/// The mesh around the loop, for the rows of the loop vertices: for each loop vertex its
+/// mesh faces as label pairs (loop vertex `j` is `j`, any other mesh vertex `EXT + e`
+/// with position `ext[e]`).
+pub struct Ring {
+    ext: Vec<DVec3>,
+    fans: Vec<Vec<(u32, u32)>>,
+}
+
+impl Ring {
+    /// Collects the mesh faces around the loop `hole`.
+    pub fn new(mesh: &Mesh, hole: &[VertexId]) -> Ring {
+        let mut label: std::collections::HashMap<VertexId, u32> = std::collections::HashMap::new();
+        for (i, &v) in hole.iter().enumerate() {
+            label.insert(v, i as u32);
+        }
+        let mut ext = Vec::new();
+        let mut fans = Vec::with_capacity(hole.len());
+        for &v in hole {
+            let mut fan = Vec::new();
+            for f in mesh.topo.vertex_faces(v) {
+                let t = mesh.topo.face(f);
+                let c = t.iter().position(|&x| x == v).unwrap_or(0);
+                let mut pair = [0u32; 2];
+                for (slot, w) in pair.iter_mut().zip([t[(c + 1) % 3], t[(c + 2) % 3]]) {
+                    *slot = *label.entry(w).or_insert_with(|| {
+                        ext.push(mesh.pos(w));
+                        EXT + (ext.len() - 1) as u32
+                    });
+                }
+                fan.push((pair[0], pair[1]));
+            }
+            fans.push(fan);
+        }
+        Ring { ext, fans }
+    }
+}
+
+/// The factored Poisson system of a patch. Unknowns are the new vertices; the loop
+/// vertices are Dirichlet values. Rows: one per new vertex, and with a [`Ring`] one per
+/// loop vertex as well (its one-ring spans the mesh, whose vertices are fixed, and the
+/// patch); the overdetermined system is solved in the least-squares sense through its
+/// normal equations. Factor once, solve for any target Laplacian field.
 pub struct PoissonSolver {
     lu: faer::sparse::linalg::solvers::Lu<usize, f64>,
-    /// Per new vertex: `2 A_i / Σ ω_ij` (scales the target Laplacian).
-    scale: Vec<f64>,
-    /// Per new vertex: `Σ_{j fixed} w_ij x_j` (the Dirichlet part of the right side).
-    fixed: Vec<DVec3>,
+    n: usize,
+    k: usize,
+    /// Rows: `(scale, unknown entries, fixed entries, own fixed label)`; the equation is
+    /// `[x_own] − Σ w_ij x_j = −scale · δ`.
+    rows: Vec<Row>,
+    ext: Vec<DVec3>,
+}
+
+struct Row {
+    /// `2 A_i / Σ ω_ij`.
+    scale: f64,
+    unknown: Vec<(usize, f64)>,
+    fixed: Vec<(u32, f64)>,
+    /// For a loop-vertex row, the loop vertex itself (fixed); `None` for a new vertex,
+    /// whose own coefficient 1 is in `unknown`.
+    own: Option<u32>,
 }
 
 impl PoissonSolver {
     /// Builds and factors the system on the geometry `pos` (loop first, `k` of them).
-    pub fn new(pos: &[DVec3], k: usize, triangles: &[[u32; 3]], edge: f64) -> Result<PoissonSolver, FillError> {
+    pub fn new(pos: &[DVec3], k: usize, triangles: &[[u32; 3]], edge: f64, ring: Option<&Ring>) -> Result<PoissonSolver, FillError> {
         let n = pos.len().saturating_sub(k);
         if n == 0 {
             return Err(FillError::Failed("the patch has no new vertex to solve for".into()));
         }
-        let mut fans: Vec<Vec<(DVec3, DVec3, u32, u32)>> = vec![Vec::new(); n];
+        if ring.is_some_and(|r| r.fans.len() != k) {
+            return Err(FillError::Failed("ring does not match the loop".into()));
+        }
+        let ext: &[DVec3] = ring.map(|r| r.ext.as_slice()).unwrap_or(&[]);
+        let at = |l: u32| -> DVec3 {
+            if l >= EXT {
+                ext[(l - EXT) as usize]
+            } else {
+                pos[l as usize]
+            }
+        };
+        let nrows = if ring.is_some() { n + k } else { n };
+        // fans: rows 0..n new vertices, n..n+k loop vertices
+        let mut fans: Vec<Vec<(DVec3, DVec3, u32, u32)>> = vec![Vec::new(); nrows];
         for t in triangles {
             if t.iter().any(|&i| i as usize >= pos.len()) {
                 return Err(FillError::Failed("patch triangle index out of range".into()));
             }
             for c in 0..3 {
                 let v = t[c] as usize;
-                if v >= k {
+                let row = if v >= k { Some(v - k) } else if ring.is_some() { Some(n + v) } else { None };
+                if let Some(r) = row {
                     let (a, b) = (t[(c + 1) % 3], t[(c + 2) % 3]);
-                    fans[v - k].push((pos[a as usize], pos[b as usize], a, b));
+                    fans[r].push((pos[a as usize], pos[b as usize], a, b));
                 }
             }
         }
-        let mut trip: Vec<Triplet<usize, usize, f64>> = Vec::new();
-        let mut scale = Vec::with_capacity(n);
-        let mut fixed = Vec::with_capacity(n);
-        for (i, fan) in fans.iter().enumerate() {
-            let p = pos[k + i];
+        if let Some(r) = ring {
+            for (i, fan) in r.fans.iter().enumerate() {
+                for &(a, b) in fan {
+                    fans[n + i].push((at(a), at(b), a, b));
+                }
+            }
+        }
+        let mut rows = Vec::with_capacity(nrows);
+        for (r, fan) in fans.iter().enumerate() {
+            let me = if r < n { k + r } else { r - n };
+            let p = pos[me];
             let (w, s) = match cot_laplacian(p, fan) {
                 Some((_, w, area)) => {
                     let sum: f64 = w.values().sum();
@@ -780,41 +1221,107 @@ impl PoissonSolver {
             };
             let sum: f64 = w.values().sum();
             if !(sum > 0.0) || !s.is_finite() {
-                return Err(FillError::Failed(format!("new vertex {i} has no neighbours")));
+                return Err(FillError::Failed(format!("patch vertex {me} has no neighbours")));
             }
-            trip.push(Triplet::new(i, i, 1.0));
-            let mut fx = DVec3::ZERO;
+            let mut unknown = Vec::new();
+            let mut fixed = Vec::new();
+            if r < n {
+                unknown.push((r, 1.0));
+            }
             for (&j, &wj) in &w {
                 let wj = wj / sum;
-                let j = j as usize;
-                if j < k {
-                    fx += wj * pos[j];
+                if j < EXT && j as usize >= k {
+                    unknown.push((j as usize - k, -wj));
                 } else {
-                    trip.push(Triplet::new(i, j - k, -wj));
+                    fixed.push((j, wj));
                 }
             }
-            scale.push(s);
-            fixed.push(fx);
+            rows.push(Row {
+                scale: s,
+                unknown,
+                fixed,
+                own: (r >= n).then_some(me as u32),
+            });
         }
+        // normal equations AᵀA (for the square system A itself)
+        let mut acc: BTreeMap<(usize, usize), f64> = BTreeMap::new();
+        if ring.is_some() {
+            for row in &rows {
+                for &(c1, v1) in &row.unknown {
+                    for &(c2, v2) in &row.unknown {
+                        *acc.entry((c1, c2)).or_insert(0.0) += v1 * v2;
+                    }
+                }
+            }
+        } else {
+            for (r, row) in rows.iter().enumerate() {
+                for &(c, v) in &row.unknown {
+                    *acc.entry((r, c)).or_insert(0.0) += v;
+                }
+            }
+        }
+        let trip: Vec<Triplet<usize, usize, f64>> = acc.into_iter().map(|((i, j), v)| Triplet::new(i, j, v)).collect();
         let a = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &trip)
             .map_err(|e| FillError::Failed(format!("Poisson matrix: {e:?}")))?;
         let lu = a
             .sp_lu()
             .map_err(|e| FillError::Failed(format!("Poisson factorisation: {e:?}")))?;
-        Ok(PoissonSolver { lu, scale, fixed })
+        Ok(PoissonSolver {
+            lu,
+            n,
+            k,
+            rows,
+            ext: ext.to_vec(),
+        })
     }
 
-    /// Positions of the new vertices whose Laplacians are `target` (one per new vertex).
-    pub fn solve(&self, target: &[DVec3]) -> Result<Vec<DVec3>, FillError> {
-        let n = self.scale.len();
-        if target.len() != n {
-            return Err(FillError::Failed("target Laplacian has the wrong length".into()));
+    /// Number of rows: new vertices first, then (with a ring) the loop vertices.
+    pub fn rows(&self) -> usize {
+        self.rows.len()
+    }
+
+    /// Positions of the new vertices whose Laplacians best match `target` (one per row:
+    /// new vertices, then loop vertices when built with a ring), with the loop vertices
+    /// at `boundary`.
+    pub fn solve(&self, boundary: &[DVec3], target: &[DVec3]) -> Result<Vec<DVec3>, FillError> {
+        let n = self.n;
+        if target.len() != self.rows.len() || boundary.len() != self.k {
+            return Err(FillError::Failed("Poisson right-hand side has the wrong length".into()));
         }
-        // x_i - Σ_unknown w_ij x_j = Σ_fixed w_ij x_j - (2A_i/Σω) δ_i
-        let rhs = Mat::<f64>::from_fn(n, 3, |i, d| {
-            let v = self.fixed[i] - self.scale[i] * target[i];
-            v[d]
-        });
+        let at = |l: u32| -> DVec3 {
+            if l >= EXT {
+                self.ext[(l - EXT) as usize]
+            } else {
+                boundary[l as usize]
+            }
+        };
+        // b_r = Σ_fixed w x_fixed − x_own − scale·δ
+        let b: Vec<DVec3> = self
+            .rows
+            .iter()
+            .zip(target)
+            .map(|(row, &d)| {
+                let fx: DVec3 = row.fixed.iter().map(|&(j, w)| w * at(j)).sum();
+                let own = row.own.map(at).unwrap_or(DVec3::ZERO);
+                fx - own - row.scale * d
+            })
+            .collect();
+        let mut rhs = Mat::<f64>::zeros(n, 3);
+        if self.rows.len() > n {
+            for (row, bv) in self.rows.iter().zip(&b) {
+                for &(c, v) in &row.unknown {
+                    for d in 0..3 {
+                        rhs[(c, d)] += v * bv[d];
+                    }
+                }
+            }
+        } else {
+            for (i, bv) in b.iter().enumerate() {
+                for d in 0..3 {
+                    rhs[(i, d)] = bv[d];
+                }
+            }
+        }
         let x = self.lu.solve(&rhs);
         let out: Vec<DVec3> = (0..n).map(|i| DVec3::new(x[(i, 0)], x[(i, 1)], x[(i, 2)])).collect();
         if out.iter().any(|p| !p.is_finite()) {
@@ -831,8 +1338,9 @@ pub fn solve_poisson(
     triangles: &[[u32; 3]],
     target: &[DVec3],
     edge: f64,
+    ring: Option<&Ring>,
 ) -> Result<Vec<DVec3>, FillError> {
-    PoissonSolver::new(pos, k, triangles, edge)?.solve(target)
+    PoissonSolver::new(pos, k, triangles, edge, ring)?.solve(&pos[..k.min(pos.len())], target)
 }
 
 #[cfg(test)]
@@ -991,6 +1499,10 @@ mod tests {
     }
 
     fn run(mesh: &Mesh, lp: &[VertexId], policy: &Policy) -> Run {
+        try_run(mesh, lp, policy).unwrap()
+    }
+
+    fn try_run(mesh: &Mesh, lp: &[VertexId], policy: &Policy) -> Result<Run, String> {
         let hole = Hole::new(0, mesh, lp.to_vec(), policy);
         let ctx = FillContext {
             mesh,
@@ -998,17 +1510,18 @@ mod tests {
             policy,
             deadline: Deadline::none(),
         };
-        let patch = fill(&ctx).unwrap();
-        let front = initial_front(mesh, lp, hole.mean_edge_length, policy.lssvm.merge_distance, &Deadline::none()).unwrap();
+        let patch = fill(&ctx).map_err(|e| e.to_string())?;
+        let front = initial_front(mesh, lp, hole.mean_edge_length, policy.lssvm.merge_distance, &Deadline::none())
+            .map_err(|e| e.to_string())?;
         assert_eq!(front.triangles, patch.triangles);
         // the patch passes the checks and applies to a valid mesh
-        check_topology(mesh, lp, &patch).unwrap();
+        check_topology(mesh, lp, &patch).map_err(|e| e.to_string())?;
         let pos = patch_positions(mesh, lp, &patch);
-        check_degenerate(&pos, &patch, &Checks::default()).unwrap();
+        check_degenerate(&pos, &patch, &Checks::default()).map_err(|e| e.to_string())?;
         let mut m2 = mesh.clone();
-        apply_patch(&mut m2, &hole, &patch).unwrap();
-        m2.validate().unwrap();
-        Run { patch, front, hole }
+        apply_patch(&mut m2, &hole, &patch)?;
+        m2.validate()?;
+        Ok(Run { patch, front, hole })
     }
 
     fn mean_max(v: impl Iterator<Item = f64>) -> (f64, f64) {
@@ -1127,6 +1640,68 @@ mod tests {
         assert!(max < 0.3 && mean < 0.15);
     }
 
+    fn noisy_sphere(sigma_rel: f64, seed: u64) -> (Mesh, Vec<VertexId>) {
+        let (mut mesh, lp) = sphere_case(4, 0.3);
+        let l0 = Hole::new(0, &mesh, lp.clone(), &Policy::default()).mean_edge_length;
+        let sigma = sigma_rel * l0;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let mut ring: HashSet<VertexId> = lp.iter().copied().collect();
+        for _ in 0..3 {
+            let cur: Vec<VertexId> = ring.iter().copied().collect();
+            for v in cur {
+                ring.extend(mesh.topo.neighbors(v));
+            }
+        }
+        let mut ring: Vec<VertexId> = ring.into_iter().collect();
+        ring.sort();
+        for v in ring {
+            let mut g = [0.0; 3];
+            for x in &mut g {
+                let u1: f64 = rng.random::<f64>().max(1e-300);
+                let u2: f64 = rng.random();
+                *x = (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
+            }
+            mesh.positions[v.idx()] += DVec3::from_array(g) * sigma;
+        }
+        (mesh, lp)
+    }
+
+    pub(super) fn sweep_impl() {
+        let s30 = sphere_case(4, 0.3);
+        let s100 = if std::env::var("BIG").is_ok() { sphere_case(6, 0.52) } else { sphere_case(5, 0.52) };
+        let (pos, faces) = cylinder(1.0, 64, 40);
+        let c = DVec3::new(1.0, 0.05, 1.7);
+        let cyl = cut_mesh(&pos, &faces, |p| (p - c).length() < 0.45, c);
+        let n05 = noisy_sphere(0.05, 7);
+        let n02 = noisy_sphere(0.02, 7);
+        let gammas: Vec<f64> = std::env::var("G").unwrap_or("0.1,1,10,100".into()).split(',').map(|x| x.parse().unwrap()).collect();
+        let kws: Vec<f64> = std::env::var("KW").unwrap_or("3,5,8,15".into()).split(',').map(|x| x.parse().unwrap()).collect();
+        for &g in &gammas {
+            for &kw in &kws {
+                let mut policy = Policy::default();
+                policy.lssvm.gamma = g;
+                policy.lssvm.kernel_width = kw;
+                let pol = |_m: &(Mesh, Vec<VertexId>)| policy.clone();
+                let sph = |m: &(Mesh, Vec<VertexId>)| match try_run(&m.0, &m.1, &pol(m)) {
+                    Ok(r) => sphere_errors(&r).0,
+                    Err(_) => (f64::NAN, f64::NAN),
+                };
+                let a = sph(&s30);
+                let b = sph(&s100);
+                let cy = match try_run(&cyl.0, &cyl.1, &pol(&cyl)) {
+                    Ok(r) => {
+                        let l = r.hole.mean_edge_length;
+                        mean_max(r.patch.new_vertices.iter().map(|p| ((p.x * p.x + p.y * p.y).sqrt() - 1.0).abs() / l))
+                    }
+                    Err(_) => (f64::NAN, f64::NAN),
+                };
+                let d = sph(&n02);
+                let e = sph(&n05);
+                eprintln!("g {g:>7} kw {kw:>4}: s30 {:.4}/{:.4} s100 {:.4}/{:.4} cyl {:.4}/{:.4} n02 {:.4}/{:.4} n05 {:.4}/{:.4}", a.0, a.1, b.0, b.1, cy.0, cy.1, d.0, d.1, e.0, e.1);
+            }
+        }
+    }
+
     #[test]
     fn same_input_same_bits() {
         let (mesh, lp) = sphere_case(4, 0.3);
@@ -1175,5 +1750,110 @@ mod tests {
             deadline: Deadline::none(),
         };
         assert!(matches!(fill(&ctx), Err(FillError::Failed(_))));
+    }
+}
+
+#[cfg(test)]
+mod sweep {
+    #[test]
+    #[ignore]
+    fn sweep() {
+        super::tests::sweep_impl();
+    }
+}
+
+#[cfg(test)]
+mod bench_probe {
+    use super::*;
+    use crate::fill::{apply_patch, Deadline, Hole};
+    use crate::io::RawMesh;
+    use crate::policy::Policy;
+
+    fn load(path: &str) -> RawMesh {
+        let (models, _) = tobj::load_obj(path, &tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() }).unwrap();
+        let m = &models[0].mesh;
+        RawMesh {
+            positions: m.positions.chunks(3).map(|c| DVec3::new(c[0], c[1], c[2])).collect(),
+            faces: m.indices.chunks(3).map(|c| [c[0], c[1], c[2]]).collect(),
+            ..Default::default()
+        }
+    }
+
+    fn closest(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> DVec3 {
+        let ab = b - a;
+        let ac = c - a;
+        let ap = p - a;
+        let d1 = ab.dot(ap);
+        let d2 = ac.dot(ap);
+        if d1 <= 0.0 && d2 <= 0.0 { return a; }
+        let bp = p - b;
+        let d3 = ab.dot(bp);
+        let d4 = ac.dot(bp);
+        if d3 >= 0.0 && d4 <= d3 { return b; }
+        let vc = d1 * d4 - d3 * d2;
+        if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 { return a + ab * (d1 / (d1 - d3)); }
+        let cp = p - c;
+        let d5 = ab.dot(cp);
+        let d6 = ac.dot(cp);
+        if d6 >= 0.0 && d5 <= d6 { return c; }
+        let vb = d5 * d2 - d1 * d6;
+        if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 { return a + ac * (d2 / (d2 - d6)); }
+        let va = d3 * d6 - d5 * d4;
+        if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 { return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6))); }
+        let denom = 1.0 / (va + vb + vc);
+        a + ab * (vb * denom) + ac * (vc * denom)
+    }
+
+    #[test]
+    #[ignore]
+    fn bench_holes() {
+        let Ok(dir) = std::env::var("LSSVM_BENCH") else { return };
+        let mut policy = Policy::default();
+        if let Ok(g) = std::env::var("G") { policy.lssvm.gamma = g.parse().unwrap(); }
+        if let Ok(g) = std::env::var("KW") { policy.lssvm.kernel_width = g.parse().unwrap(); }
+        if let Ok(g) = std::env::var("IT") { policy.lssvm.iterations = g.parse().unwrap(); }
+        for name in ["fandisk", "cheburashka", "homer", "stanford-bunny"] {
+            let holed = format!("{dir}/{name}/holed.obj");
+            if !std::path::Path::new(&holed).exists() { continue; }
+            let raw = load(&holed);
+            let gt = load(&format!("{dir}/{name}/gt.obj"));
+            let gtt: Vec<[DVec3; 3]> = gt.faces.iter().map(|f| f.map(|i| gt.positions[i as usize])).collect();
+            let (mut mesh, _) = Mesh::from_raw(&raw);
+            let diag = mesh.bbox_diagonal();
+            let loops = mesh.topo.boundary_loops();
+            let (mut ok, mut n, mut apes) = (0, 0, Vec::new());
+            for (id, lp) in loops.into_iter().enumerate() {
+                if lp.len() <= 6 { continue; }
+                n += 1;
+                let hole = Hole::new(id, &mesh, lp.clone(), &policy);
+                let ctx = FillContext { mesh: &mesh, hole: &hole, policy: &policy, deadline: Deadline::none() };
+                let t0 = std::time::Instant::now();
+                let res = fill(&ctx);
+                let ms = t0.elapsed().as_secs_f64() * 1e3;
+                match res {
+                    Ok(patch) => {
+                        let chk = crate::check::Checker::new(&mesh).check_patch(&mesh, &lp, &patch, &policy.checks);
+                        let ape = if gtt.is_empty() { f64::NAN } else {
+                            patch.new_vertices.iter().map(|&p| gtt.iter().map(|t| (closest(p, t[0], t[1], t[2]) - p).length()).fold(f64::INFINITY, f64::min)).sum::<f64>() / patch.new_vertices.len().max(1) as f64 / diag * 1000.0
+                        };
+                        let front = initial_front(&mesh, &lp, hole.mean_edge_length, policy.lssvm.merge_distance, &Deadline::none()).unwrap();
+                        let ape0 = if gtt.is_empty() { f64::NAN } else {
+                            front.new_vertices.iter().map(|&p| gtt.iter().map(|t| (closest(p, t[0], t[1], t[2]) - p).length()).fold(f64::INFINITY, f64::min)).sum::<f64>() / front.new_vertices.len().max(1) as f64 / diag * 1000.0
+                        };
+                        match chk {
+                            Ok(q) => {
+                                apply_patch(&mut mesh, &hole, &patch).unwrap();
+                                ok += 1;
+                                apes.push(ape);
+                                eprintln!("{name} hole k={} new={} ape {ape:.3} (front {ape0:.3}) q {:.2} {ms:.0} ms", lp.len(), patch.new_vertices.len(), q.q_good_share);
+                            }
+                            Err(e) => eprintln!("{name} hole k={} REJECTED {e} ape {ape:.3} {ms:.0} ms", lp.len()),
+                        }
+                    }
+                    Err(e) => eprintln!("{name} hole k={} FAILED {e} {ms:.0} ms", lp.len()),
+                }
+            }
+            eprintln!("== {name}: {ok}/{n} closed, mean APE {:.3}", apes.iter().sum::<f64>() / apes.len().max(1) as f64);
+        }
     }
 }
