@@ -212,7 +212,7 @@ pub struct Lssvm {
     pub rings: usize,
     /// LS-SVM regularisation `gamma` of eq. 11/14 (larger: closer fit, less smoothing).
     pub gamma: f64,
-    /// RBF kernel width sigma, in units of the hole's mean boundary edge length.
+    /// RBF kernel width sigma, in units of the hole loop's radius (perimeter / 2π).
     pub kernel_width: f64,
     /// Outer iterations of predict-then-solve (the Laplacian is recomputed each time).
     pub iterations: usize,
@@ -225,8 +225,8 @@ impl Default for Lssvm {
     fn default() -> Self {
         Lssvm {
             rings: 3,
-            gamma: 100.0,
-            kernel_width: 8.0,
+            gamma: 10.0,
+            kernel_width: 0.7,
             iterations: 2,
             merge_distance: 0.5,
         }
