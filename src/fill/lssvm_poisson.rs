@@ -23,7 +23,7 @@
 //!    loop's extent. A refused step tries the plain ear, then the next vertex by angle;
 //!    when every vertex is refused, the best ear of the loop's best-fit-plane projection
 //!    is clipped (when that projection is a simple polygon). Caps: `k² + 100k + 1000`
-//!    steps and `k²/2 + 10k` new vertices (k = loop length; the largest disk with the
+//!    steps and `k²/4 + 10k` new vertices (k = loop length; the largest disk with the
 //!    loop's perimeter needs about `0.18 k²`).
 //!    **Fallback** (not in the paper): when that 3-D front fails, the same front runs on
 //!    the loop projected to its best-fit (Newell) plane (if simple), where the tests are
@@ -221,8 +221,10 @@ pub const PREDICTION_SCALES: [f64; 4] = [1.0, 0.5, 0.25, 0.0];
 /// Smallest angle of a solved patch triangle, in degrees.
 const SOUND_MIN_ANGLE_DEG: f64 = 1.0;
 
-/// A solved patch is sound when no triangle is thinner than [`SOUND_MIN_ANGLE_DEG`] and
-/// none turned by more than 90° from the geometry it was solved on (`old`).
+/// A solved patch is sound when no two adjacent triangles fold onto each other (unit
+/// normals with a dot product below [`FOLD_DOT`]) and no triangle has an angle below
+/// [`SOUND_MIN_ANGLE_DEG`] (or below its smallest angle in `old`, the geometry it was
+/// solved on, when that was smaller already).
 fn is_sound(boundary: &[DVec3], old: &[DVec3], new: &[DVec3], triangles: &[[u32; 3]]) -> bool {
     let k = boundary.len();
     let at = |v: &[DVec3], i: u32| {
@@ -234,14 +236,39 @@ fn is_sound(boundary: &[DVec3], old: &[DVec3], new: &[DVec3], triangles: &[[u32;
         }
     };
     let min = SOUND_MIN_ANGLE_DEG.to_radians();
-    triangles.iter().all(|t| {
+    let mut normals = Vec::with_capacity(triangles.len());
+    for t in triangles {
         let [a, b, c] = t.map(|i| at(new, i));
         let [a0, b0, c0] = t.map(|i| at(old, i));
-        let n = geom::tri_normal_raw(a, b, c);
-        n.dot(geom::tri_normal_raw(a0, b0, c0)) > 0.0
-            && geom::angles(a, b, c).iter().all(|&x| x >= min)
-    })
+        let min0 = geom::angles(a0, b0, c0)
+            .into_iter()
+            .fold(f64::INFINITY, f64::min);
+        let floor = min.min(min0);
+        if !geom::angles(a, b, c).iter().all(|&x| x >= floor) {
+            return false;
+        }
+        normals.push(geom::tri_normal_raw(a, b, c).normalize_or_zero());
+    }
+    let mut by_edge: std::collections::HashMap<(u32, u32), usize> =
+        std::collections::HashMap::new();
+    for (ti, t) in triangles.iter().enumerate() {
+        for c in 0..3 {
+            let key = ukey(t[c], t[(c + 1) % 3]);
+            if let Some(&other) = by_edge.get(&key) {
+                if normals[ti].dot(normals[other]) < FOLD_DOT {
+                    return false;
+                }
+            } else {
+                by_edge.insert(key, ti);
+            }
+        }
+    }
+    true
 }
+
+/// Adjacent patch triangles whose unit normals have a smaller dot product (a dihedral
+/// angle above 120°) count as a fold.
+const FOLD_DOT: f64 = -0.5;
 
 /// Guide normal field over the hole: inverse-square-distance mean of the loop's vertex
 /// normals. It does not depend on the patch, so it cannot drift with it.
@@ -366,8 +393,8 @@ fn run_front(
     let mut f = front
         .ok_or_else(|| FillError::Failed("the loop's projection is not a simple polygon".into()))?;
     let cap = k * k + 100 * k + 1000;
-    // twice the vertex count of the largest disk with this perimeter, plus slack
-    let vertex_cap = k + k * k / 2 + 10 * k;
+    // 1.4 times the vertex count of the largest disk with this perimeter, plus slack
+    let vertex_cap = k + k * k / 4 + 10 * k;
     let mut steps = 0usize;
     let mut loops: Vec<Vec<u32>> = vec![(0..k as u32).collect()];
     while let Some(lp) = loops.pop() {
@@ -633,20 +660,29 @@ impl Front {
             }
         }
         // every rule refused: clip the best ear of the loop's projection
-        self.clip_ear(lp).ok_or_else(|| {
-            FillError::Failed(format!(
-                "advancing front is stuck on a loop of {m} vertices"
-            ))
-        })
+        let pts: Vec<DVec3> = lp.iter().map(|&v| self.pos[v as usize]).collect();
+        let mean_guide = pts
+            .iter()
+            .map(|&p| self.guide.at(p))
+            .sum::<DVec3>()
+            .normalize_or_zero();
+        let newell = geom::newell_normal(&pts);
+        self.clip_ear(lp, newell)
+            .or_else(|| self.clip_ear(lp, mean_guide))
+            .ok_or_else(|| {
+                FillError::Failed(format!(
+                    "advancing front is stuck on a loop of {m} vertices"
+                ))
+            })
     }
 
-    /// Fallback when no front rule applies: project the loop onto its best-fit plane
-    /// (Newell normal) and, when the projection is a simple polygon, cut off the ear
-    /// with the largest smallest angle whose new edge is not an existing edge.
-    fn clip_ear(&mut self, lp: &[u32]) -> Option<Vec<Vec<u32>>> {
+    /// Fallback when no front rule applies: project the loop onto the plane normal to
+    /// `n` (its best-fit plane, then the mean guide normal) and, when the projection is a
+    /// simple polygon, cut off the ear with the largest smallest angle whose new edge is
+    /// not an existing edge.
+    fn clip_ear(&mut self, lp: &[u32], n: DVec3) -> Option<Vec<Vec<u32>>> {
         let m = lp.len();
         let pts: Vec<DVec3> = lp.iter().map(|&v| self.pos[v as usize]).collect();
-        let n = geom::newell_normal(&pts);
         if n == DVec3::ZERO {
             return None;
         }
