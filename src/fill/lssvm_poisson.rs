@@ -67,11 +67,12 @@
 //!    `δ'` is the prediction at each vertex projected onto its normal, its length capped
 //!    at the [`CLAMP_QUANTILE`] quantile of the training lengths (a crease's spikes do
 //!    not set the cap). Predict-then-solve runs `iterations` times, recomputing weights,
-//!    areas and normals. **Safeguard** (not in the paper): a solution in which a triangle
-//!    turns over (by more than 90° from the geometry it was solved on) or gets an angle
-//!    below 1° is solved again with the prediction scaled by [`PREDICTION_SCALES`]
-//!    (the last, 0, is the least-squares membrane); if every one folds the previous
-//!    geometry is kept. A non-finite result fails.
+//!    areas and normals. **Safeguard** (not in the paper): a solution in which two
+//!    adjacent triangles fold (dihedral angle above 120°) or a triangle gets an angle
+//!    below 1° (or below its smallest angle before the solve) is solved again with the
+//!    prediction scaled by [`PREDICTION_SCALES`] (the last, 0, is the least-squares
+//!    membrane); if every one folds the previous geometry is kept. A non-finite result
+//!    fails.
 //!
 //! Connectivity is the front's throughout; only the positions of new vertices change.
 
