@@ -1946,6 +1946,50 @@ mod tests {
     }
 
     #[test]
+    fn small_loops_close() {
+        // one removed grid cell (4 vertices, no new vertex needed) and a removed vertex star
+        let (pos, faces) = grid(6);
+        let cell = 2 * (2 * 6 + 2);
+        let mut f1 = faces.clone();
+        f1.drain(cell..cell + 2);
+        let raw = RawMesh {
+            positions: pos.clone(),
+            faces: f1,
+            ..Default::default()
+        };
+        let (mesh, _) = Mesh::from_raw(&raw);
+        let lp = mesh
+            .topo
+            .boundary_loops()
+            .into_iter()
+            .find(|l| l.len() == 4)
+            .unwrap();
+        let r = run(&mesh, &lp, &Policy::default());
+        assert_eq!(r.patch.triangles.len(), 2);
+        let c = DVec3::new(2.0, 3.0, 0.0);
+        let (mesh, lp) = cut_mesh(&pos, &faces, |p| (p - c).length() < 0.5, c);
+        assert_eq!(lp.len(), 6);
+        let r = run(&mesh, &lp, &Policy::default());
+        for p in &r.patch.new_vertices {
+            assert!(p.z.abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn a_passed_deadline_is_a_timeout() {
+        let (mesh, lp) = sphere_case(4, 0.3);
+        let policy = Policy::default();
+        let hole = Hole::new(0, &mesh, lp, &policy);
+        let ctx = FillContext {
+            mesh: &mesh,
+            hole: &hole,
+            policy: &policy,
+            deadline: Deadline(Some(std::time::Instant::now())),
+        };
+        assert_eq!(fill(&ctx), Err(FillError::Timeout));
+    }
+
+    #[test]
     fn bad_policy_values_fail_cleanly() {
         let (pos, faces) = grid(10);
         let c = DVec3::new(5.2, 4.9, 0.0);
