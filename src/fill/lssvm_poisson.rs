@@ -344,7 +344,9 @@ pub fn initial_front(
                 t => t,
             })?;
             let boundary: Vec<DVec3> = hole.iter().map(|&v| mesh.pos(v)).collect();
-            let pts = project_loop(&boundary).ok_or_else(|| FillError::Failed(why3d.clone()))?;
+            let normals: Vec<DVec3> = hole.iter().map(|&v| mesh.vertex_normal(v)).collect();
+            let pts = project_loop(&boundary, &normals)
+                .ok_or_else(|| FillError::Failed(why3d.clone()))?;
             let pos: Vec<DVec3> = pts
                 .into_iter()
                 .chain(flat.new_vertices.iter().copied())
@@ -361,10 +363,17 @@ pub fn initial_front(
     }
 }
 
-/// The loop projected onto its best-fit (Newell) plane, as points with `z = 0`, when
-/// that projection is a simple polygon.
-fn project_loop(pts: &[DVec3]) -> Option<Vec<DVec3>> {
-    let n = geom::newell_normal(pts);
+/// The loop projected onto a plane in which it is a simple, counter-clockwise polygon,
+/// as points with `z = 0`: its best-fit (Newell) plane, else the plane normal to the
+/// mean of its vertex normals (`normals`). `None` when neither works.
+fn project_loop(pts: &[DVec3], normals: &[DVec3]) -> Option<Vec<DVec3>> {
+    let mean = normals.iter().copied().sum::<DVec3>().normalize_or_zero();
+    [geom::newell_normal(pts), mean]
+        .into_iter()
+        .find_map(|n| project_along(pts, n))
+}
+
+fn project_along(pts: &[DVec3], n: DVec3) -> Option<Vec<DVec3>> {
     if n == DVec3::ZERO {
         return None;
     }
@@ -372,6 +381,15 @@ fn project_loop(pts: &[DVec3]) -> Option<Vec<DVec3>> {
     let t2 = n.cross(t1);
     let q: Vec<(f64, f64)> = pts.iter().map(|p| (p.dot(t1), p.dot(t2))).collect();
     let m = q.len();
+    let area2: f64 = (0..m)
+        .map(|i| {
+            let (a, b) = (q[i], q[(i + 1) % m]);
+            a.0 * b.1 - b.0 * a.1
+        })
+        .sum();
+    if !positive(area2) {
+        return None;
+    }
     for a in 0..m {
         for b in a + 2..m {
             if a == 0 && b == m - 1 {
@@ -509,7 +527,8 @@ impl Front {
             })
             .collect();
         if planar {
-            pos = project_loop(&pos)?;
+            let normals: Vec<DVec3> = hole.iter().map(|&v| mesh.vertex_normal(v)).collect();
+            pos = project_loop(&pos, &normals)?;
             nacc = vec![DVec3::Z; k];
         }
         let mut index = std::collections::HashMap::new();
