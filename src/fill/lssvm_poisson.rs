@@ -26,7 +26,8 @@
 //!    steps and `k²/4 + 10k` new vertices (k = loop length; the largest disk with the
 //!    loop's perimeter needs about `0.18 k²`).
 //!    **Fallback** (not in the paper): when that 3-D front fails, the same front runs on
-//!    the loop projected to its best-fit (Newell) plane (if simple), where the tests are
+//!    the loop projected to its best-fit (Newell) plane, or else to the plane normal to
+//!    its mean vertex normal (whichever gives a simple polygon), where the tests are
 //!    exact, and the new vertices are lifted by a harmonic map (the Poisson system below
 //!    with a zero target on the planar geometry).
 //!    The patch is then relaxed with [`RELAX_ITERATIONS`] umbrella steps (factor
