@@ -41,17 +41,25 @@ pub enum Method {
     MinAreaFair,
     /// Improved advancing front (paper 002 §5.3).
     AdvancingFront,
+    /// Plain advancing front, LS-SVM prediction of the Laplacian, Poisson solve (paper 003).
+    LssvmPoisson,
 }
 
 impl Method {
     /// Every method, in policy spelling.
-    pub const ALL: &'static [Method] = &[Method::Fan, Method::MinAreaFair, Method::AdvancingFront];
+    pub const ALL: &'static [Method] = &[
+        Method::Fan,
+        Method::MinAreaFair,
+        Method::AdvancingFront,
+        Method::LssvmPoisson,
+    ];
     /// The policy spelling.
     pub fn name(self) -> &'static str {
         match self {
             Method::Fan => "fan",
             Method::MinAreaFair => "min_area_fair",
             Method::AdvancingFront => "advancing_front",
+            Method::LssvmPoisson => "lssvm_poisson",
         }
     }
 }
@@ -217,6 +225,57 @@ impl Default for Front {
     }
 }
 
+/// LS-SVM + Poisson (paper 003, Xu et al. 2013; ALGORITHMS E).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct Lssvm {
+    /// Rings of mesh vertices around the hole whose Laplacians train the regression.
+    pub rings: usize,
+    /// LS-SVM regularisation `gamma` of eq. 11/14 (larger: closer fit, less smoothing).
+    pub gamma: f64,
+    /// RBF kernel width sigma, in units of the hole loop's radius (perimeter / 2π).
+    pub kernel_width: f64,
+    /// Outer iterations of predict-then-solve (the Laplacian is recomputed each time).
+    pub iterations: usize,
+    /// A new front vertex closer than this times the mean boundary edge length to a
+    /// front vertex is merged into it.
+    pub merge_distance: f64,
+}
+
+impl Default for Lssvm {
+    fn default() -> Self {
+        Lssvm {
+            rings: 3,
+            gamma: 10.0,
+            kernel_width: 0.7,
+            iterations: 2,
+            merge_distance: 0.5,
+        }
+    }
+}
+
+impl Lssvm {
+    /// Range checks; `Err((key, message))`.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        if self.rings == 0 {
+            return Err(("lssvm.rings".into(), "must be at least 1".into()));
+        }
+        if !(self.gamma.is_finite() && self.gamma > 0.0 && self.gamma <= 1e10) {
+            return Err(("lssvm.gamma".into(), "must be in (0, 1e10]".into()));
+        }
+        if !(self.kernel_width.is_finite() && self.kernel_width > 0.0) {
+            return Err(("lssvm.kernel_width".into(), "must be a positive number".into()));
+        }
+        if self.iterations == 0 || self.iterations > 100 {
+            return Err(("lssvm.iterations".into(), "must be in 1..=100".into()));
+        }
+        if !(self.merge_distance.is_finite() && self.merge_distance >= 0.0 && self.merge_distance < 1.0) {
+            return Err(("lssvm.merge_distance".into(), "must be in [0, 1)".into()));
+        }
+        Ok(())
+    }
+}
+
 /// Patch checks (ALGORITHMS A5).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
@@ -315,6 +374,7 @@ pub struct Policy {
     pub checks: Checks,
     pub limits: Limits,
     pub smooth: Smooth,
+    pub lssvm: Lssvm,
 }
 
 /// A name as the policy spells it (methods and the other string-valued keys).
@@ -726,6 +786,7 @@ impl Policy {
                 ),
             ));
         }
+        self.lssvm.validate()?;
         Ok(())
     }
 }
