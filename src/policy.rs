@@ -255,22 +255,38 @@ impl Default for Lssvm {
 }
 
 impl Lssvm {
-    /// Range checks; `Err((key, message))`.
-    pub fn validate(&self) -> Result<(), (String, String)> {
-        if self.rings == 0 {
-            return Err(("lssvm.rings".into(), "must be at least 1".into()));
+    /// Range checks.
+    pub fn validate(&self) -> Result<(), Invalid> {
+        if self.rings == 0 || self.rings > 20 {
+            return Err(Invalid::new(
+                "lssvm.rings",
+                format!("must be in 1..=20 (got {})", self.rings),
+            ));
         }
         if !(self.gamma.is_finite() && self.gamma > 0.0 && self.gamma <= 1e10) {
-            return Err(("lssvm.gamma".into(), "must be in (0, 1e10]".into()));
+            return Err(Invalid::new(
+                "lssvm.gamma",
+                format!("must be in (0, 1e10] (got {})", self.gamma),
+            ));
         }
-        if !(self.kernel_width.is_finite() && self.kernel_width > 0.0) {
-            return Err(("lssvm.kernel_width".into(), "must be a positive number".into()));
+        if !(self.kernel_width.is_finite() && self.kernel_width > 0.0 && self.kernel_width <= 100.0)
+        {
+            return Err(Invalid::new(
+                "lssvm.kernel_width",
+                format!("must be in (0, 100] (got {})", self.kernel_width),
+            ));
         }
         if self.iterations == 0 || self.iterations > 100 {
-            return Err(("lssvm.iterations".into(), "must be in 1..=100".into()));
+            return Err(Invalid::new(
+                "lssvm.iterations",
+                format!("must be in 1..=100 (got {})", self.iterations),
+            ));
         }
-        if !(self.merge_distance.is_finite() && self.merge_distance >= 0.0 && self.merge_distance < 1.0) {
-            return Err(("lssvm.merge_distance".into(), "must be in [0, 1)".into()));
+        if !(self.merge_distance.is_finite() && (0.0..1.0).contains(&self.merge_distance)) {
+            return Err(Invalid::new(
+                "lssvm.merge_distance",
+                format!("must be in [0, 1) (got {})", self.merge_distance),
+            ));
         }
         Ok(())
     }
@@ -477,6 +493,16 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
             "scope",
             "rings",
             "boundary",
+        ],
+    ),
+    (
+        "lssvm",
+        &[
+            "rings",
+            "gamma",
+            "kernel_width",
+            "iterations",
+            "merge_distance",
         ],
     ),
 ];
@@ -1067,6 +1093,11 @@ impl Reader<'_> {
                 p.front.max_steps_per_vertex = self.usize(key, v)?
             }
             ("front", "fair") => p.front.fair = self.boolean(key, v)?,
+            ("lssvm", "rings") => p.lssvm.rings = self.usize(key, v)?,
+            ("lssvm", "gamma") => p.lssvm.gamma = self.float(key, v)?,
+            ("lssvm", "kernel_width") => p.lssvm.kernel_width = self.float(key, v)?,
+            ("lssvm", "iterations") => p.lssvm.iterations = self.usize(key, v)?,
+            ("lssvm", "merge_distance") => p.lssvm.merge_distance = self.float(key, v)?,
             ("checks", "self_intersection") => p.checks.self_intersection = self.boolean(key, v)?,
             ("checks", "min_angle_deg") => p.checks.min_angle_deg = self.float(key, v)?,
             ("limits", "hole_time_ms") => p.limits.hole_time_ms = self.uint(key, v)?,
@@ -1276,7 +1307,7 @@ mod tests {
             }
         }
         assert_eq!(root.len(), TOP_LEVEL_KEYS.len() + SECTIONS.len());
-        assert_eq!(n, 33);
+        assert_eq!(n, SECTIONS.iter().map(|(_, k)| k.len()).sum::<usize>());
     }
 
     #[test]
@@ -1363,10 +1394,10 @@ mod tests {
         let e = err("[limits]\nbananas = 3\n");
         assert_eq!(e.line, Some(2));
         assert_eq!(e.message, "unknown key; [limits] has `hole_time_ms`");
-        let e = err("[front]\nrings = 3\n");
+        let e = err("[front]\nonly_longest = true\n");
         assert_eq!(
             e.message,
-            "unknown key; `rings` belongs in [smooth], not [front]"
+            "unknown key; `only_longest` belongs in [border], not [front]"
         );
         let e = err("[smooth]\nseed = 3\n");
         assert!(e.message.contains("belongs at the top level"), "{e}");
@@ -1411,13 +1442,21 @@ mod tests {
         assert_eq!(e.key.as_deref(), Some("dispatch.middle"));
         assert_eq!(
             e.message,
-            "unknown method \"advancing-front\"; did you mean \"advancing_front\"? \
-             (methods: \"fan\", \"min_area_fair\", \"advancing_front\")"
+            format!(
+                "unknown method \"advancing-front\"; did you mean \"advancing_front\"? (methods: {})",
+                Method::ALL
+                    .iter()
+                    .map(|m| format!("\"{}\"", m.name()))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
         );
         let e = err("[dispatch]\nsmall = [\"delaunay\"]\n");
-        assert_eq!(
-            e.message,
-            "unknown method \"delaunay\"; (methods: \"fan\", \"min_area_fair\", \"advancing_front\")"
+        assert!(
+            e.message
+                .starts_with("unknown method \"delaunay\"; (methods: \"fan\", \"min_area_fair\", \"advancing_front\""),
+            "{}",
+            e.message
         );
         let e = err("[dispatch]\nsmall = \"fan\"\n");
         assert!(
@@ -1727,6 +1766,7 @@ mod tests {
                 smooth: Smooth {
                     enabled, iterations, lambda: lm.0, mu: lm.1, weights: smooth_weights, scope, rings, boundary,
                 },
+                ..Policy::default()
             }
         }
     }

@@ -106,7 +106,7 @@ const UNIFORM_WEIGHT: f64 = 1.154_700_538_379_251_5;
 pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
     let opts = &ctx.policy.lssvm;
     opts.validate()
-        .map_err(|(k, m)| FillError::Failed(format!("policy key `{k}`: {m}")))?;
+        .map_err(|e| FillError::Failed(format!("policy {e}")))?;
     let k = ctx.hole.len();
     if k < 3 {
         return Err(FillError::Failed(format!(
