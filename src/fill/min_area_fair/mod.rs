@@ -124,7 +124,7 @@ pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
     let scale = loop_scales(ctx.mesh, &ctx.hole.vertices, ctx.hole.mean_edge_length);
     let mut r = refine::Refiner::new(pts, scale, tris, &forbidden);
     r.refine(ctx.policy.refine.density, &ctx.deadline)?;
-    let refined = r.pos.len() > k;
+    let refined = ctx.policy.refine.density > 0.0;
     if refined {
         let extra = if ctx.policy.fair.continuity == 0 {
             RELAX_FAIRED
@@ -147,6 +147,17 @@ pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
         patch.new_vertices = r.pos[k..].to_vec();
         patch.triangles = r.tris.clone();
         fair::fair_patch(ctx.mesh, ctx.hole, &mut patch, &ctx.policy.fair)?;
+    }
+    if ctx.policy.fair.continuity > 0 && !patch.new_vertices.is_empty() {
+        // fairing moves vertices: mend any sliver it made with a flip
+        r.pos.truncate(k);
+        r.pos.extend_from_slice(&patch.new_vertices);
+        let limit = (2.0 * ctx.policy.checks.min_angle_deg)
+            .max(2.0)
+            .to_radians();
+        if r.fix_slivers(limit, &ctx.deadline)? > 0 {
+            patch.triangles = r.tris.clone();
+        }
     }
     Ok(patch)
 }
