@@ -91,9 +91,9 @@ pub fn loop_scales(mesh: &Mesh, lp: &[VertexId], fallback: f64) -> Vec<f64> {
 }
 
 /// Relaxation rounds on the refined (flat) patch before fairing.
-const RELAX_FLAT: usize = 10;
+const RELAX_FLAT: usize = 8;
 /// Relaxation rounds on the faired patch before the second fairing.
-const RELAX_FAIRED: usize = 4;
+const RELAX_FAIRED: usize = 3;
 
 /// Fills the hole: triangulate, refine, relax, fair.
 pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {

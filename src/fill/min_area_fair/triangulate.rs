@@ -106,7 +106,7 @@ impl W {
         if self.bad != o.bad {
             return self.bad < o.bad;
         }
-        if (self.dih - o.dih).abs() > 1e-9 {
+        if (self.dih - o.dih).abs() > 1e-12 {
             return self.dih < o.dih;
         }
         self.area < o.area
@@ -117,24 +117,33 @@ fn unit_normal(a: DVec3, b: DVec3, c: DVec3) -> DVec3 {
     (b - a).cross(c - a).normalize_or_zero()
 }
 
+/// Dihedral measure between two unit normals: `1 - cos(angle)`, monotone in the
+/// angle (0 coplanar, 2 folded back), cheaper than the angle itself.
 fn dihedral(n1: DVec3, n2: DVec3) -> f64 {
     if n1 == DVec3::ZERO || n2 == DVec3::ZERO {
-        return std::f64::consts::PI;
+        return 2.0;
     }
-    n1.dot(n2).clamp(-1.0, 1.0).acos()
+    1.0 - n1.dot(n2).clamp(-1.0, 1.0)
 }
 
 /// Weight of triangle (a, m, b) alone (loop indices), without dihedral terms.
 fn tri_weight(inp: &LoopInput, a: u32, m: u32, b: u32) -> W {
     let [pa, pm, pb] = [a, m, b].map(|i| inp.pts[i as usize]);
     let area = super::super::geom::tri_area(pa, pm, pb);
-    let l = (pm - pa)
-        .length()
-        .max((pb - pm).length())
-        .max((pa - pb).length());
-    let ang = super::super::geom::angles(pa, pm, pb);
-    let min = ang[0].min(ang[1]).min(ang[2]);
-    let bad = area.is_nan() || area <= 1e-12 * l * l || min < inp.min_angle;
+    // the smallest angle is opposite the shortest edge; compare cosines
+    let mut l = [
+        (pm - pb).length_squared(),
+        (pb - pa).length_squared(),
+        (pa - pm).length_squared(),
+    ];
+    l.sort_unstable_by(|x, y| x.total_cmp(y));
+    let [s, m2, g] = l;
+    let cos_min = if m2 > 0.0 && g > 0.0 {
+        (m2 + g - s) / (2.0 * (m2 * g).sqrt())
+    } else {
+        1.0
+    };
+    let bad = area.is_nan() || area <= 1e-12 * g || cos_min > inp.min_angle.cos();
     W {
         bad: bad as u32,
         dih: 0.0,
