@@ -188,23 +188,14 @@ pub fn exact(inp: &LoopInput, idx: &[u32]) -> Result<Vec<[u32; 3]>, FillError> {
         best[at(i, i + 1)] = Some(W::ZERO);
     }
     let dih = inp.dihedral();
-    // normal of the triangle on the inner side of the polygon edge or chord i-j
-    let side_normal = |best: &[Option<W>], arg: &[u32], i: usize, j: usize| -> Option<DVec3> {
-        if j == i + 1 {
-            inp.outside(idx[i], idx[j])
-        } else {
-            let m = arg[at(i, j)];
-            if m == u32::MAX || best[at(i, j)].is_none() {
-                return None;
-            }
-            let m = m as usize;
-            Some(unit_normal(
-                inp.pts[idx[i] as usize],
-                inp.pts[idx[m] as usize],
-                inp.pts[idx[j] as usize],
-            ))
+    // normal of the triangle on the inner side of each polygon edge or chord i-j
+    let mut side: Vec<Option<DVec3>> = vec![None; if dih { n * n } else { 0 }];
+    if dih {
+        for i in 0..n - 1 {
+            side[at(i, i + 1)] = inp.outside(idx[i], idx[i + 1]);
         }
-    };
+    }
+    let p = |i: usize| inp.pts[idx[i] as usize];
     for d in 2..n {
         inp.deadline.check()?;
         for i in 0..n - d {
@@ -213,21 +204,28 @@ pub fn exact(inp: &LoopInput, idx: &[u32]) -> Result<Vec<[u32; 3]>, FillError> {
             if !closing && !inp.chord_ok(idx[i], idx[j]) {
                 continue;
             }
-            let mut cur: Option<(W, u32)> = None;
+            let mut cur: Option<(W, u32, DVec3)> = None;
             for m in i + 1..j {
                 let (Some(wl), Some(wr)) = (best[at(i, m)], best[at(m, j)]) else {
                     continue;
                 };
-                let mut w = wl.plus(wr).plus(tri_weight(inp, idx[i], idx[m], idx[j]));
-                if dih {
-                    let [pi, pm, pj] = [idx[i], idx[m], idx[j]].map(|v| inp.pts[v as usize]);
-                    let nt = unit_normal(pi, pm, pj);
-                    let mut worst = 0.0f64;
-                    if let Some(nl) = side_normal(&best, &arg, i, m) {
-                        worst = worst.max(dihedral(nt, nl));
+                let partial = wl.plus(wr);
+                // weights only grow: a partial sum that is not better cannot win
+                if let Some(c) = &cur {
+                    if !partial.better_than(&c.0) {
+                        continue;
                     }
-                    if let Some(nr) = side_normal(&best, &arg, m, j) {
-                        worst = worst.max(dihedral(nt, nr));
+                }
+                let mut w = partial.plus(tri_weight(inp, idx[i], idx[m], idx[j]));
+                let nt = if dih {
+                    unit_normal(p(i), p(m), p(j))
+                } else {
+                    DVec3::ZERO
+                };
+                if dih {
+                    let mut worst = 0.0f64;
+                    for nn in [side[at(i, m)], side[at(m, j)]].into_iter().flatten() {
+                        worst = worst.max(dihedral(nt, nn));
                     }
                     if closing {
                         if let Some(no) = inp.outside(idx[j], idx[i]) {
@@ -237,12 +235,15 @@ pub fn exact(inp: &LoopInput, idx: &[u32]) -> Result<Vec<[u32; 3]>, FillError> {
                     w.dih = w.dih.max(worst);
                 }
                 if cur.as_ref().map_or(true, |c| w.better_than(&c.0)) {
-                    cur = Some((w, m as u32));
+                    cur = Some((w, m as u32, nt));
                 }
             }
-            if let Some((w, m)) = cur {
+            if let Some((w, m, nt)) = cur {
                 best[at(i, j)] = Some(w);
                 arg[at(i, j)] = m;
+                if dih {
+                    side[at(i, j)] = Some(nt);
+                }
             }
         }
     }
