@@ -212,7 +212,7 @@ fn build_operator(local: &LocalMesh, weights: Weights, norm: Normalization) -> O
 /// The factorisation: Cholesky when the system is symmetric positive definite, else LU.
 enum Factor {
     Llt(faer::sparse::linalg::solvers::Llt<usize, f64>),
-    Lu(faer::sparse::linalg::solvers::Lu<usize, f64>),
+    Lu(Box<faer::sparse::linalg::solvers::Lu<usize, f64>>),
 }
 
 /// Fairing system of one patch, factored once; [`FairSolver::solve`] gives the new
@@ -281,13 +281,12 @@ impl FairSolver {
         } else {
             None
         };
-        let factor =
-            match llt {
-                Some(l) => Factor::Llt(l),
-                None => Factor::Lu(mat.sp_lu().map_err(|e| {
-                    FillError::Failed(format!("fairing factorisation failed: {e:?}"))
-                })?),
-            };
+        let factor = match llt {
+            Some(l) => Factor::Llt(l),
+            None => Factor::Lu(Box::new(mat.sp_lu().map_err(|e| {
+                FillError::Failed(format!("fairing factorisation failed: {e:?}"))
+            })?)),
+        };
         Ok(FairSolver {
             factor,
             rhs,
