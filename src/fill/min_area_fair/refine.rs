@@ -22,6 +22,31 @@
 use super::super::{Deadline, FillError};
 use glam::DVec3;
 use std::collections::{HashMap, HashSet};
+use std::hash::{BuildHasherDefault, Hasher};
+
+/// A fast hasher for the small integer keys of the edge map (the default SipHash
+/// dominated the refinement time).
+#[derive(Default)]
+pub struct EdgeHasher(u64);
+
+impl Hasher for EdgeHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(b as u64);
+        }
+    }
+    fn write_u32(&mut self, i: u32) {
+        self.write_u64(i as u64);
+    }
+    fn write_u64(&mut self, i: u64) {
+        self.0 = (self.0.rotate_left(5) ^ i).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+}
+
+type EdgeMap = HashMap<(u32, u32), u32, BuildHasherDefault<EdgeHasher>>;
 
 /// The patch during refinement.
 pub struct Refiner<'a> {
@@ -32,7 +57,7 @@ pub struct Refiner<'a> {
     /// Triangles over `pos`.
     pub tris: Vec<[u32; 3]>,
     /// Directed edge -> triangle.
-    edges: HashMap<(u32, u32), u32>,
+    edges: EdgeMap,
     k: usize,
     forbidden: &'a HashSet<(u32, u32)>,
     /// Relaxation uses valence flips (else Delaunay swaps).
@@ -45,9 +70,21 @@ pub struct Refiner<'a> {
 /// create; an operation that would go below it (and below what was there) is refused.
 const SLIVER_GUARD: f64 = 15.0;
 
+/// Smallest angle of a triangle (radians): the one opposite the shortest edge.
 fn min_angle(a: DVec3, b: DVec3, c: DVec3) -> f64 {
-    let g = super::super::geom::angles(a, b, c);
-    g[0].min(g[1]).min(g[2])
+    let mut l = [
+        (b - c).length_squared(),
+        (c - a).length_squared(),
+        (a - b).length_squared(),
+    ];
+    l.sort_unstable_by(|x, y| x.total_cmp(y));
+    let [s, m, g] = l;
+    if m.is_nan() || g.is_nan() || m <= 0.0 || g <= 0.0 {
+        return 0.0;
+    }
+    ((m + g - s) / (2.0 * (m * g).sqrt()))
+        .clamp(-1.0, 1.0)
+        .acos()
 }
 
 /// Hard cap on the refined patch size (a guard against absurd scales).
@@ -63,7 +100,7 @@ impl<'a> Refiner<'a> {
         forbidden: &'a HashSet<(u32, u32)>,
     ) -> Refiner<'a> {
         let k = pos.len();
-        let mut edges = HashMap::with_capacity(tris.len() * 3);
+        let mut edges = EdgeMap::with_capacity_and_hasher(tris.len() * 3, Default::default());
         for (t, tri) in tris.iter().enumerate() {
             for c in 0..3 {
                 edges.insert((tri[c], tri[(c + 1) % 3]), t as u32);
@@ -199,10 +236,7 @@ impl<'a> Refiner<'a> {
     /// smallest angle before and 15 degrees (a valence flip must not make slivers).
     fn flip_keeps_angles(&self, a: u32, b: u32, c: u32, d: u32) -> bool {
         let [pa, pb, pc, pd] = [a, b, c, d].map(|i| self.pos[i as usize]);
-        let min3 = |x: DVec3, y: DVec3, z: DVec3| {
-            let g = super::super::geom::angles(x, y, z);
-            g[0].min(g[1]).min(g[2])
-        };
+        let min3 = min_angle;
         let before = min3(pa, pb, pc).min(min3(pb, pa, pd));
         let after = min3(pc, pa, pd).min(min3(pd, pb, pc));
         after >= before.min(SLIVER_GUARD.to_radians())
@@ -413,13 +447,10 @@ impl<'a> Refiner<'a> {
     }
 
     /// Flips the longest edge of every triangle whose smallest angle is below
-    /// `min_angle` (radians) when that raises the smallest angle of the pair; a few
+    /// `limit` (radians) when that raises the smallest angle of the pair; a few
     /// passes. Used after fairing, which can move vertices into slivers.
-    pub fn fix_slivers(&mut self, min_angle: f64, deadline: &Deadline) -> Result<usize, FillError> {
-        let min3 = |x: DVec3, y: DVec3, z: DVec3| {
-            let g = super::super::geom::angles(x, y, z);
-            g[0].min(g[1]).min(g[2])
-        };
+    pub fn fix_slivers(&mut self, limit: f64, deadline: &Deadline) -> Result<usize, FillError> {
+        let min3 = min_angle;
         let mut flips = 0;
         for _ in 0..4 {
             deadline.check()?;
@@ -428,7 +459,7 @@ impl<'a> Refiner<'a> {
                 let tri = self.tris[t];
                 let p = tri.map(|i| self.pos[i as usize]);
                 let before_t = min3(p[0], p[1], p[2]);
-                if before_t >= min_angle {
+                if before_t >= limit {
                     continue;
                 }
                 // longest edge
@@ -527,10 +558,7 @@ impl<'a> Refiner<'a> {
                 let q = p + d;
                 // keep every incident triangle oriented, and its smallest angle above
                 // the smaller of the current one and 15 degrees
-                let min3 = |x: DVec3, y: DVec3, z: DVec3| {
-                    let g = super::super::geom::angles(x, y, z);
-                    g[0].min(g[1]).min(g[2])
-                };
+                let min3 = min_angle;
                 let mut before_min = f64::INFINITY;
                 let mut after_min = f64::INFINITY;
                 for &t in &fan[v - k] {
