@@ -10,6 +10,15 @@
 //! 3. [`crate::fill::fair`]: the new vertices solve `Δ^c x = 0` (`fair.continuity`,
 //!    `fair.weights`) with the loop and enough outer rings of the mesh fixed.
 //!
+//! Beyond the paper (for the quality target `Qt > 1.39` on most patch triangles, which
+//! Liepa-style refinement alone reaches on about half of them): between stages 2 and 3
+//! the refined patch is relaxed ([`refine::Refiner::relax`]: long-edge splits, valence
+//! flips, tangential smoothing toward equilateral triangles, never making slivers), and
+//! after a first fairing it is relaxed again on the faired surface and faired once more;
+//! finally a sliver the fairing made is flipped away if it can be. With cotangent
+//! weights the tangential layout survives fairing (linear precision), so the relaxed
+//! shapes are what the output gets.
+//!
 //! Reading of the vague passages: the paper's step 13-15 ("search the two adjacent faces
 //! of the boundary, combine them with the refined patch and deform the new patch by
 //! Laplace-Beltrami") is read as Liepa's and CGAL's fairing: only the new vertices move,

@@ -18,6 +18,13 @@
 //! edge), when a new triangle would be degenerate, or when it would fold against the
 //! pair it replaces; a flip budget bounds the swapping on non-planar patches, where 3D
 //! Delaunay flips need not terminate.
+//!
+//! Not in the paper: [`Refiner::relax`], a light isotropic remeshing of the new
+//! vertices (interior edges longer than 1.6 times the local scale are split at their
+//! midpoint, flips bring valences toward 6, and each new vertex moves in its tangent
+//! plane toward the mean of the apexes that would make its triangles equilateral). Every
+//! operation is refused when it would create an angle below 15 degrees (or below what
+//! was there); loop vertices never move.
 
 use super::super::{Deadline, FillError};
 use glam::DVec3;
