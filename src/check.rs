@@ -80,16 +80,11 @@ pub fn check_topology(mesh: &Mesh, hole: &[VertexId], patch: &Patch) -> Result<(
         }
         for c in 0..3 {
             if !directed.insert((t[c], t[(c + 1) % 3])) {
-                return err(format!(
-                    "edge {}-{} is used twice in one direction",
-                    t[c],
-                    t[(c + 1) % 3]
-                ));
+                return err(format!("edge {}-{} is used twice in one direction", t[c], t[(c + 1) % 3]));
             }
         }
     }
-    let is_loop_edge =
-        |a: u32, b: u32| (a as usize) < k && (b as usize) < k && (a as usize + 1) % k == b as usize;
+    let is_loop_edge = |a: u32, b: u32| (a as usize) < k && (b as usize) < k && (a as usize + 1) % k == b as usize;
     let mut edges = 0usize;
     for &(a, b) in &directed {
         if is_loop_edge(a, b) {
@@ -97,9 +92,7 @@ pub fn check_topology(mesh: &Mesh, hole: &[VertexId], patch: &Patch) -> Result<(
             continue;
         }
         if is_loop_edge(b, a) {
-            return err(format!(
-                "boundary edge {b}-{a} is covered with the wrong orientation"
-            ));
+            return err(format!("boundary edge {b}-{a} is covered with the wrong orientation"));
         }
         if !directed.contains(&(b, a)) {
             return err(format!("edge {a}-{b} is left open"));
@@ -184,10 +177,7 @@ pub fn check_degenerate(pos: &[DVec3], patch: &Patch, opts: &Checks) -> Result<(
         let ang = geom::angles(a, b, c);
         let m = ang[0].min(ang[1]).min(ang[2]);
         if m < min_angle {
-            return Err(CheckFailure::Degenerate(
-                ti,
-                format!("smallest angle {:.3} deg", m.to_degrees()),
-            ));
+            return Err(CheckFailure::Degenerate(ti, format!("smallest angle {:.3} deg", m.to_degrees())));
         }
     }
     Ok(())
@@ -228,11 +218,7 @@ pub fn quality(pos: &[DVec3], k: usize, patch: &Patch) -> PatchQuality {
         } else {
             good as f64 / patch.triangles.len() as f64
         },
-        min_angle_deg: if min_angle.is_finite() {
-            min_angle.to_degrees()
-        } else {
-            0.0
-        },
+        min_angle_deg: if min_angle.is_finite() { min_angle.to_degrees() } else { 0.0 },
         valence6_share,
     }
 }

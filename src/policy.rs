@@ -225,9 +225,7 @@ pub struct Limits {
 
 impl Default for Limits {
     fn default() -> Self {
-        Limits {
-            hole_time_ms: 10_000,
-        }
+        Limits { hole_time_ms: 10_000 }
     }
 }
 
@@ -321,9 +319,7 @@ impl Policy {
     /// Parses and validates policy text; `path` names it in errors.
     pub fn from_toml_str(text: &str, path: &Path) -> Result<Policy, PolicyError> {
         let policy: Policy = toml::from_str(text).map_err(|e| {
-            let line = e
-                .span()
-                .map(|s| text[..s.start.min(text.len())].lines().count().max(1));
+            let line = e.span().map(|s| text[..s.start.min(text.len())].lines().count().max(1));
             PolicyError {
                 file: path.to_path_buf(),
                 line,
@@ -352,16 +348,9 @@ impl Policy {
             return Err(("dispatch.small_max".into(), "must be at least 3".into()));
         }
         if d.middle_max < d.small_max {
-            return Err((
-                "dispatch.middle_max".into(),
-                "must be at least dispatch.small_max".into(),
-            ));
+            return Err(("dispatch.middle_max".into(), "must be at least dispatch.small_max".into()));
         }
-        for (k, l) in [
-            ("dispatch.small", &d.small),
-            ("dispatch.middle", &d.middle),
-            ("dispatch.large", &d.large),
-        ] {
+        for (k, l) in [("dispatch.small", &d.small), ("dispatch.middle", &d.middle), ("dispatch.large", &d.large)] {
             if l.is_empty() {
                 return Err((k.into(), "needs at least one method".into()));
             }

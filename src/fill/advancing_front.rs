@@ -3,7 +3,5 @@ use super::{FillContext, FillError, Patch};
 
 /// Fills the hole.
 pub fn fill(_ctx: &FillContext) -> Result<Patch, FillError> {
-    Err(FillError::Failed(
-        "advancing_front is not available yet".into(),
-    ))
+    Err(FillError::Failed("advancing_front is not available yet".into()))
 }

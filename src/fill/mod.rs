@@ -128,11 +128,7 @@ impl FillContext<'_> {
     }
     /// Positions of the loop.
     pub fn boundary_positions(&self) -> Vec<DVec3> {
-        self.hole
-            .vertices
-            .iter()
-            .map(|&v| self.mesh.pos(v))
-            .collect()
+        self.hole.vertices.iter().map(|&v| self.mesh.pos(v)).collect()
     }
 }
 
@@ -156,12 +152,7 @@ pub fn methods_for(policy: &Policy, class: HoleClass) -> &[Method] {
 
 /// Fills one hole with the class's method list, checking every patch and applying
 /// the first accepted one. Returns the hole's log entry.
-pub fn fill_hole(
-    mesh: &mut Mesh,
-    hole: &Hole,
-    policy: &Policy,
-    checker: &mut Checker,
-) -> HoleReport {
+pub fn fill_hole(mesh: &mut Mesh, hole: &Hole, policy: &Policy, checker: &mut Checker) -> HoleReport {
     let t0 = Instant::now();
     let mut rep = HoleReport {
         id: hole.id,
@@ -179,10 +170,7 @@ pub fn fill_hole(
         ms: 0.0,
     };
     if hole.len() < 3 {
-        rep.reason = format!(
-            "a loop of {} boundary vertices cannot be filled",
-            hole.len()
-        );
+        rep.reason = format!("a loop of {} boundary vertices cannot be filled", hole.len());
         rep.ms = ms_since(t0);
         return rep;
     }
@@ -258,11 +246,7 @@ pub fn fill_hole(
 
 /// Adds a checked patch to the mesh. Returns the range of new face indices.
 /// On failure the mesh is left as it was.
-pub fn apply_patch(
-    mesh: &mut Mesh,
-    hole: &Hole,
-    patch: &Patch,
-) -> Result<std::ops::Range<usize>, String> {
+pub fn apply_patch(mesh: &mut Mesh, hole: &Hole, patch: &Patch) -> Result<std::ops::Range<usize>, String> {
     let k = hole.len();
     let nv0 = mesh.num_vertices();
     let nf0 = mesh.num_faces();
@@ -271,9 +255,7 @@ pub fn apply_patch(
         bc
     });
     for &p in &patch.new_vertices {
-        let col = colors
-            .as_ref()
-            .map(|bc| interpolate_color(mesh, hole, bc, p));
+        let col = colors.as_ref().map(|bc| interpolate_color(mesh, hole, bc, p));
         mesh.add_vertex(p, col);
     }
     let map = |i: u32| -> Result<VertexId, String> {
@@ -316,11 +298,7 @@ fn interpolate_color(mesh: &Mesh, hole: &Hole, bc: &[[f32; 3]], p: DVec3) -> [f3
         wsum += w;
     }
     if wsum > 0.0 {
-        [
-            (acc[0] / wsum) as f32,
-            (acc[1] / wsum) as f32,
-            (acc[2] / wsum) as f32,
-        ]
+        [(acc[0] / wsum) as f32, (acc[1] / wsum) as f32, (acc[2] / wsum) as f32]
     } else {
         [0.5, 0.5, 0.5]
     }
