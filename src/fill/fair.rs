@@ -294,6 +294,11 @@ impl FairSolver {
         })
     }
 
+    /// True when the system was factored by Cholesky (symmetric), false for LU.
+    pub fn is_cholesky(&self) -> bool {
+        matches!(self.factor, Factor::Llt(_))
+    }
+
     /// Number of unknowns.
     pub fn len(&self) -> usize {
         self.unknowns.len()
@@ -535,6 +540,31 @@ mod tests {
         fair_local(&mut m, 2, Weights::Uniform).unwrap();
         for p in &m.positions {
             assert!((p.z - f(p.x, p.y)).abs() < 1e-9, "{p}");
+        }
+    }
+
+    #[test]
+    fn degenerate_start_takes_the_lu_path_and_stays_exact() {
+        // a free vertex starting on top of its neighbour makes its triangles degenerate:
+        // it falls back to uniform weights, the system is no longer symmetric and is
+        // solved by LU; the solution still satisfies z = f(x, y) exactly, because the
+        // operator's rows sum to zero whatever the weights
+        let f = |x: f64, y: f64| 0.3 * x - 0.2 * y + 1.0;
+        for c in 1..=3u8 {
+            let mut m = grid(10, f);
+            let n = 10;
+            let v = 5 * (n + 1) + 5;
+            m.positions[v] = m.positions[v + 1];
+            let s = FairSolver::new(&m, c, Weights::Cotangent, Normalization::VoronoiArea).unwrap();
+            assert!(!s.is_cholesky());
+            let x = s.solve().unwrap();
+            for p in &x {
+                assert!((p.z - f(p.x, p.y)).abs() < 1e-9, "c={c} {p}");
+            }
+            let m2 = grid(10, f);
+            let s2 =
+                FairSolver::new(&m2, c, Weights::Cotangent, Normalization::VoronoiArea).unwrap();
+            assert!(s2.is_cholesky());
         }
     }
 
