@@ -20,17 +20,25 @@ pub enum Method {
     MinAreaFair,
     /// Improved advancing front (paper 002 §5.3).
     AdvancingFront,
+    /// Improved wavefront with curvature restoration (paper 004, Huang et al. 2022).
+    Wavefront,
 }
 
 impl Method {
     /// Every method, in policy spelling.
-    pub const ALL: &'static [Method] = &[Method::Fan, Method::MinAreaFair, Method::AdvancingFront];
+    pub const ALL: &'static [Method] = &[
+        Method::Fan,
+        Method::MinAreaFair,
+        Method::AdvancingFront,
+        Method::Wavefront,
+    ];
     /// The policy spelling.
     pub fn name(self) -> &'static str {
         match self {
             Method::Fan => "fan",
             Method::MinAreaFair => "min_area_fair",
             Method::AdvancingFront => "advancing_front",
+            Method::Wavefront => "wavefront",
         }
     }
 }
@@ -196,6 +204,39 @@ impl Default for Front {
     }
 }
 
+/// The improved wavefront with curvature restoration (paper 004, ALGORITHMS C).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct Wavefront {
+    /// At or below this front angle (degrees) the vertex is closed with one triangle.
+    pub alpha: f64,
+    /// At or below this angle one new point on the bisector; above, two on the trisectors.
+    pub beta: f64,
+    /// When the smallest front angle is at least this (degrees), a front vertex drawn
+    /// at random (from `seed`) is processed instead.
+    pub mu: f64,
+    /// Rotate each new triangle to its expected normal (paper 004 §2.2.1).
+    pub curvature_restoration: bool,
+    /// Give up (and fall back) after this many front steps per boundary vertex.
+    pub max_steps_per_vertex: usize,
+    /// A new point closer than this times the hole's mean boundary edge length to a
+    /// non-adjacent front vertex is merged into it.
+    pub merge_distance: f64,
+}
+
+impl Default for Wavefront {
+    fn default() -> Self {
+        Wavefront {
+            alpha: 75.0,
+            beta: 135.0,
+            mu: 150.0,
+            curvature_restoration: true,
+            max_steps_per_vertex: 200,
+            merge_distance: 0.5,
+        }
+    }
+}
+
 /// Patch checks (ALGORITHMS A5).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
@@ -289,6 +330,7 @@ pub struct Policy {
     pub refine: Refine,
     pub fair: Fair,
     pub front: Front,
+    pub wavefront: Wavefront,
     pub checks: Checks,
     pub limits: Limits,
     pub smooth: Smooth,

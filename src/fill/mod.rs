@@ -10,6 +10,7 @@ pub mod advancing_front;
 pub mod fan;
 pub mod geom;
 pub mod min_area_fair;
+pub mod wavefront;
 
 use crate::check::Checker;
 use crate::mesh::{Mesh, VertexId};
@@ -137,6 +138,7 @@ pub fn run_method(method: Method, ctx: &FillContext) -> Result<Patch, FillError>
         Method::Fan => fan::fill(ctx),
         Method::MinAreaFair => min_area_fair::fill(ctx),
         Method::AdvancingFront => advancing_front::fill(ctx),
+        Method::Wavefront => wavefront::fill(ctx),
     }
 }
 
