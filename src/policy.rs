@@ -204,6 +204,18 @@ impl Default for Front {
     }
 }
 
+/// Where the wavefront puts a new point out of the vertex's tangent plane.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum WavefrontPlacement {
+    /// In the plane of the two front edges (paper 004 §2.2; interpolated where that
+    /// plane is ill-conditioned).
+    EdgePlane,
+    /// Elevation interpolated between the two front edges' elevations (follows the
+    /// chords; restoration then tends to flatten).
+    Interpolated,
+}
+
 /// The improved wavefront with curvature restoration (paper 004, ALGORITHMS C).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
@@ -217,6 +229,8 @@ pub struct Wavefront {
     pub mu: f64,
     /// Rotate each new triangle to its expected normal (paper 004 §2.2.1).
     pub curvature_restoration: bool,
+    /// Out-of-plane placement of new points.
+    pub placement: WavefrontPlacement,
     /// Give up (and fall back) after this many front steps per boundary vertex.
     pub max_steps_per_vertex: usize,
     /// A new point closer than this times the hole's mean boundary edge length to a
@@ -231,6 +245,7 @@ impl Default for Wavefront {
             beta: 135.0,
             mu: 150.0,
             curvature_restoration: true,
+            placement: WavefrontPlacement::EdgePlane,
             max_steps_per_vertex: 200,
             merge_distance: 0.5,
         }
