@@ -57,14 +57,14 @@
 //! one step costs `O(log n)` plus a local neighbourhood.
 
 use super::{FillContext, FillError, Patch};
-use crate::policy::Wavefront;
+use crate::policy::{Wavefront, WavefrontPlacement};
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use robust::{orient2d, orient3d, Coord, Coord3D};
 use std::cmp::{Ordering, Reverse};
 use std::collections::{BinaryHeap, HashMap, HashSet};
-use std::f64::consts::TAU;
+use std::f64::consts::{FRAC_PI_4, PI, TAU};
 
 /// A new triangle must face the processed vertex's expected normal at least this much
 /// (cosine of the angle between the normals).
@@ -74,6 +74,13 @@ const FACING_MIN: f64 = 0.05;
 const PROJECT_MIN: f64 = 0.2;
 /// A cell of the spatial hash is this many `Avglen` wide.
 const CELL: f64 = 2.0;
+/// With `placement = "edge_plane"`, the plane of the two front edges is used fully when
+/// θ is at least this far from 0 and π, and blended into the interpolated elevation
+/// (by `sin θ / sin PLANE_WINDOW`) closer to a straight angle, where the plane tilts
+/// without bound; reflex vertices use the interpolated elevation.
+const PLANE_WINDOW: f64 = FRAC_PI_4;
+/// Edge elevations are clamped to this (radians) before taking tangents.
+const MAX_EL: f64 = 1.4;
 /// A triangle spanning more cells than this is kept in a list tested every time.
 const MAX_CELLS: i64 = 512;
 
@@ -268,6 +275,7 @@ struct Wave {
     len: f64,
     min_angle: f64,
     restore: bool,
+    placement: WavefrontPlacement,
     merge_radius: f64,
     /// Positions in patch numbering (loop first, then new points).
     pos: Vec<DVec3>,
@@ -289,6 +297,9 @@ struct Wave {
     node_grid: Grid,
     rng: ChaCha8Rng,
     fallback_normal: DVec3,
+    /// New points must lie within `reach` of `centre` (the loop's centroid).
+    centre: DVec3,
+    reach: f64,
     scratch: Vec<u32>,
 }
 
@@ -428,11 +439,19 @@ impl Wave {
         }
         let pos: Vec<DVec3> = hole.iter().map(|&v| mesh.pos(v)).collect();
         let fallback_normal = unit_or(super::geom::newell_normal(&pos), DVec3::Z);
+        let centre = super::geom::centroid(&pos);
+        let reach = 2.0
+            * pos
+                .iter()
+                .map(|&p| (p - centre).length())
+                .fold(0.0, f64::max)
+            + 2.0 * len;
         let mut w = Wave {
             k,
             len,
             min_angle: ctx.policy.checks.min_angle_deg.max(0.0).to_radians() + 1e-9,
             restore: opts.curvature_restoration,
+            placement: opts.placement,
             merge_radius: opts.merge_distance * len,
             acc: vec![DVec3::ZERO; k],
             pos,
@@ -452,6 +471,8 @@ impl Wave {
                 ctx.policy.seed ^ (ctx.hole.id as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
             ),
             fallback_normal,
+            centre,
+            reach,
             scratch: Vec::new(),
         };
         // mesh faces around the hole: expected normals (Eq. 1) and obstacles
@@ -694,8 +715,29 @@ impl Wave {
         let bn = nrm.cross(tn);
         let (s, c) = (f * theta).sin_cos();
         let dt = tn * c + bn * s;
-        let el = (1.0 - f) * en.dot(nrm).clamp(-1.0, 1.0).asin()
-            + f * ep.dot(nrm).clamp(-1.0, 1.0).asin();
+        let el_n = en.dot(nrm).clamp(-1.0, 1.0).asin();
+        let el_p = ep.dot(nrm).clamp(-1.0, 1.0).asin();
+        let interp = (1.0 - f) * el_n + f * el_p;
+        let el = match self.placement {
+            WavefrontPlacement::Interpolated => interp,
+            WavefrontPlacement::EdgePlane if theta < PI => {
+                // the plane of the two edges as a height function over the tangent plane:
+                // slope g·d with g·t_n = tan el_n and g·t_p = tan el_p
+                let (hn, hp) = (
+                    el_n.clamp(-MAX_EL, MAX_EL).tan(),
+                    el_p.clamp(-MAX_EL, MAX_EL).tan(),
+                );
+                let st = theta.sin();
+                let w = (st / PLANE_WINDOW.sin()).clamp(0.0, 1.0);
+                if w > 0.0 {
+                    let g2 = (hp - hn * theta.cos()) / st;
+                    w * (hn * c + g2 * s).atan() + (1.0 - w) * interp
+                } else {
+                    interp
+                }
+            }
+            WavefrontPlacement::EdgePlane => interp,
+        };
         let (se, ce) = el.sin_cos();
         dt * ce + nrm * se
     }
@@ -761,7 +803,7 @@ impl Wave {
         let mut chain = vec![Item::Node(pn)];
         let mut merged: Option<u32> = None;
         for &x in &pts {
-            if !x.is_finite() {
+            if !x.is_finite() || (x - self.centre).length() > self.reach {
                 return None;
             }
             if r > 0.0 {
@@ -1162,7 +1204,9 @@ mod tests {
         let mut loops = mesh.topo.boundary_loops();
         loops.sort_by(|a, b| {
             let c = |l: &Vec<VertexId>| {
-                (l.iter().map(|&v| mesh.pos(v)).sum::<DVec3>() / l.len() as f64 - p).length()
+                l.iter()
+                    .map(|&v| (mesh.pos(v) - p).length())
+                    .fold(0.0, f64::max)
             };
             c(a).total_cmp(&c(b))
         });
@@ -1228,15 +1272,70 @@ mod tests {
         let patch = r.unwrap();
         accept(&mesh, &hole, &patch, &policy);
         let (mean, max) = stats(&patch, |p| (p.length() - 1.0).abs());
+        let (smean, _) = stats(&patch, |p| p.length() - 1.0);
+        eprintln!(
+            "signed {smean:.5} n={} L={:.4}",
+            patch.new_vertices.len(),
+            hole.mean_edge_length
+        );
         (k, mean, max)
     }
 
     #[test]
     fn sphere_holes_stay_near_the_sphere() {
-        for (level, cap) in [(3, 0.55), (5, 0.7)] {
+        for (level, cap) in [(3, 0.55), (3, 0.8), (4, 0.5), (4, 0.9), (5, 0.7)] {
             let (k, with, with_max) = sphere_case(level, cap, true);
             let (_, without, without_max) = sphere_case(level, cap, false);
             eprintln!("sphere k={k}: restoration mean {with:.5} max {with_max:.5}; without mean {without:.5} max {without_max:.5}");
+        }
+    }
+
+    fn surface_case(
+        raw: &RawMesh,
+        centre: DVec3,
+        restore: bool,
+        err: impl Fn(DVec3) -> f64,
+    ) -> (usize, f64, f64, f64) {
+        let (mesh, _) = Mesh::from_raw(raw);
+        let mut policy = Policy::default();
+        policy.wavefront.curvature_restoration = restore;
+        let l = loop_near(&mesh, centre);
+        let k = l.len();
+        let (hole, r) = run(&mesh, l, &policy);
+        let patch = r.unwrap();
+        accept(&mesh, &hole, &patch, &policy);
+        let (mean, max) = stats(&patch, |p| err(p).abs());
+        let (smean, _) = stats(&patch, &err);
+        (k, mean, max, smean)
+    }
+
+    #[test]
+    fn explore_surfaces() {
+        for restore in [true, false] {
+            let cyl = cylinder_hole(1.0, 60, 40, 0.1, 0.5);
+            let r = surface_case(&cyl, DVec3::new(1.0, 0.0, 0.0), restore, |p| {
+                (p.x * p.x + p.y * p.y).sqrt() - 1.0
+            });
+            eprintln!(
+                "cylinder restore={restore}: k={} mean {:.5} max {:.5} signed {:.5}",
+                r.0, r.1, r.2, r.3
+            );
+            let sad = grid_hole(40, 0.45, |x, y| x * x - y * y);
+            let r = surface_case(&sad, DVec3::ZERO, restore, |p| {
+                p.z - (p.x * p.x - p.y * p.y)
+            });
+            eprintln!(
+                "saddle restore={restore}: k={} mean {:.5} max {:.5} signed {:.5}",
+                r.0, r.1, r.2, r.3
+            );
+            let bowl = grid_hole(40, 0.45, |x, y| 0.5 * (x * x + y * y));
+            let r = surface_case(&bowl, DVec3::ZERO, restore, |p| {
+                p.z - 0.5 * (p.x * p.x + p.y * p.y)
+            });
+            eprintln!(
+                "paraboloid restore={restore}: k={} mean {:.5} max {:.5} signed {:.5}",
+                r.0, r.1, r.2, r.3
+            );
         }
     }
 }
