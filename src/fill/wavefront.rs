@@ -317,10 +317,9 @@ enum Item {
 }
 
 /// A validated step: the chain `[v_{i-1}, new or merged points..., v_{i+1}]` that replaces
-/// the processed vertex, and the front node merged into, if any.
+/// the processed vertex (an interior `Item::Node` is the front node merged into).
 struct Plan {
     chain: Vec<Item>,
-    merged: Option<u32>,
 }
 
 /// The state of the front.
@@ -357,6 +356,8 @@ struct Wave {
     stats: Stats,
     /// Stuck: thin triangles are allowed until the next successful step.
     relaxed: bool,
+    /// The front lost its shape (a bug, never expected): the run fails cleanly.
+    corrupt: bool,
     scratch: Vec<u32>,
 }
 
@@ -532,6 +533,7 @@ impl Wave {
             reach,
             stats: Stats::default(),
             relaxed: false,
+            corrupt: false,
             scratch: Vec::new(),
         };
         // mesh faces around the hole: expected normals (Eq. 1) and obstacles
@@ -558,8 +560,7 @@ impl Wave {
             }
         }
         for i in 0..k {
-            let id = w.new_node(i as u32, ((i + k - 1) % k) as u32, ((i + 1) % k) as u32, 0);
-            debug_assert_eq!(id as usize, i);
+            w.new_node(i as u32, ((i + k - 1) % k) as u32, ((i + 1) % k) as u32, 0);
         }
         for i in 0..k {
             w.refresh(i as u32);
@@ -709,7 +710,13 @@ impl Wave {
                     self.alive[i]
                 }
             };
-            if self.process(node, alpha, beta) {
+            let advanced = self.process(node, alpha, beta);
+            if self.corrupt {
+                return Err(FillError::Failed(
+                    "internal error: the front lost its shape".into(),
+                ));
+            }
+            if advanced {
                 stalls = 0;
                 self.relaxed = false;
             } else {
@@ -990,7 +997,7 @@ impl Wave {
         {
             return None;
         }
-        Some(Plan { chain, merged })
+        Some(Plan { chain })
     }
 
     /// Would the step leave a front of three vertices whose last triangle is flipped, or
@@ -1268,7 +1275,6 @@ impl Wave {
                 }
             }
         }
-        debug_assert_eq!(split.map(|s| s.0), plan.merged);
         for j in 0..last {
             self.add_triangle([verts[j], nd.vert, verts[j + 1]]);
         }
@@ -1301,6 +1307,7 @@ impl Wave {
         // walk both cycles together; the shorter one becomes a new front
         let (mut x, mut y) = (a, b);
         let mut count = 0usize;
+        let bound = self.nodes.len();
         let small = loop {
             count += 1;
             x = self.nodes[x as usize].next;
@@ -1311,18 +1318,23 @@ impl Wave {
             if y == b {
                 break b;
             }
+            if count > bound {
+                self.corrupt = true;
+                return;
+            }
         };
         let old = self.nodes[a as usize].front as usize;
         let new = self.front_size.len() as u32;
         self.front_size.push(count);
+        if self.front_size[old] < count + 2 {
+            self.corrupt = true;
+            return;
+        }
         self.front_size[old] -= count;
         let mut z = small;
-        loop {
+        for _ in 0..count {
             self.nodes[z as usize].front = new;
             z = self.nodes[z as usize].next;
-            if z == small {
-                break;
-            }
         }
         for (start, f) in [
             (a, self.nodes[a as usize].front),
