@@ -829,7 +829,6 @@ impl Wave {
         let nd = self.nodes[node as usize];
         let v = self.p(node);
         let en = unit_or(self.p(nd.next) - v, DVec3::ZERO);
-        let ep = unit_or(self.p(nd.prev) - v, DVec3::ZERO);
         let tn = unit_or(en - nrm * en.dot(nrm), nrm.any_orthonormal_vector());
         let bn = nrm.cross(tn);
         let (s, c) = (f * theta).sin_cos();
