@@ -119,6 +119,8 @@ const MAX_EL: f64 = 1.4;
 /// A step may not leave a front angle below this (radians, 1 degree) at the processed
 /// vertex's neighbours: it would only close as a sliver.
 const MIN_FRONT_ANGLE: f64 = 1.0 * PI / 180.0;
+/// A stuck front of at most this many vertices is closed by ear clipping.
+const SMALL_FRONT: usize = 10;
 /// A triangle spanning more cells than this is kept in a list tested every time.
 const MAX_CELLS: i64 = 512;
 
@@ -142,6 +144,8 @@ pub struct Stats {
     pub failed_steps: usize,
     /// Times the front got stuck and thin triangles were allowed for one step.
     pub relaxed_steps: usize,
+    /// Small stuck fronts closed by unchecked ear clipping.
+    pub clipped_fronts: usize,
 }
 
 /// [`fill`], also returning what the run did.
@@ -755,6 +759,9 @@ impl Wave {
         let nd = self.nodes[node as usize];
         let (pn, nn) = (nd.prev, nd.next);
         let nv = self.expected_normal(node);
+        if self.relaxed && self.front_size[nd.front as usize] <= SMALL_FRONT {
+            return self.clip_small_front(node);
+        }
         if self.front_size[nd.front as usize] == 3 {
             let t = [
                 self.nodes[pn as usize].vert,
@@ -822,6 +829,55 @@ impl Wave {
         } else {
             (self.len * sum / n as f64).clamp(-MAX_EL, MAX_EL)
         }
+    }
+
+    /// Last resort for a small stuck front: ear clipping without the overlap and angle
+    /// tests (best smallest angle first among ears facing the front's mean normal, else
+    /// the best ear). The dispatcher's checks judge the result.
+    fn clip_small_front(&mut self, start: u32) -> bool {
+        let f = self.nodes[start as usize].front as usize;
+        let mut ring = vec![start];
+        let mut a = self.nodes[start as usize].next;
+        while a != start && ring.len() <= SMALL_FRONT {
+            ring.push(a);
+            a = self.nodes[a as usize].next;
+        }
+        if a != start || ring.len() < 3 {
+            return false;
+        }
+        let vert = |w: &Wave, n: u32| w.nodes[n as usize].vert;
+        let pts: Vec<DVec3> = ring.iter().map(|&n| self.p(n)).collect();
+        let nrm = unit_or(super::geom::newell_normal(&pts), self.expected_normal(start));
+        while ring.len() > 3 {
+            let m = ring.len();
+            let mut best: Option<(bool, f64, usize)> = None;
+            for i in 0..m {
+                let t = [ring[(i + m - 1) % m], ring[i], ring[(i + 1) % m]].map(|n| vert(self, n));
+                if self.edge_exists(t[0], t[2]) {
+                    continue;
+                }
+                let p = t.map(|x| self.pos[x as usize]);
+                let n = unit_or((p[1] - p[0]).cross(p[2] - p[0]), DVec3::ZERO);
+                let ang = super::geom::angles(p[0], p[1], p[2]);
+                let key = (n.dot(nrm) > FACING_MIN, ang[0].min(ang[1]).min(ang[2]), i);
+                if best.map_or(true, |b| (key.0, key.1) > (b.0, b.1)) {
+                    best = Some(key);
+                }
+            }
+            let Some((_, _, i)) = best else { return false };
+            let t = [ring[(i + m - 1) % m], ring[i], ring[(i + 1) % m]].map(|n| vert(self, n));
+            self.add_triangle(t);
+            self.kill(ring[i]);
+            ring.remove(i);
+        }
+        let t = [ring[0], ring[1], ring[2]].map(|n| vert(self, n));
+        self.add_triangle(t);
+        for n in ring {
+            self.kill(n);
+        }
+        self.front_size[f] = 0;
+        self.stats.clipped_fronts += 1;
+        true
     }
 
     /// Direction from the vertex at fraction `f` of θ from the next edge (see module doc).
