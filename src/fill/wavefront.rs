@@ -366,6 +366,12 @@ struct Wave {
     /// New points must lie within `reach` of `centre` (the loop's centroid).
     centre: DVec3,
     reach: f64,
+    /// The loop projected onto its best-fit plane (basis `plane_u`, `plane_w` at
+    /// `centre`), and the smallest distance of a projected loop vertex from the centre.
+    loop2d: Vec<(f64, f64)>,
+    plane_u: DVec3,
+    plane_w: DVec3,
+    inner: f64,
     stats: Stats,
     /// Stuck: thin triangles are allowed until the next successful step.
     relaxed: bool,
@@ -511,6 +517,10 @@ impl Wave {
         let pos: Vec<DVec3> = hole.iter().map(|&v| mesh.pos(v)).collect();
         let fallback_normal = unit_or(super::geom::newell_normal(&pos), DVec3::Z);
         let centre = super::geom::centroid(&pos);
+        let pu = fallback_normal.any_orthonormal_vector();
+        let pw = fallback_normal.cross(pu);
+        let loop2d: Vec<(f64, f64)> = pos.iter().map(|&p| ((p - centre).dot(pu), (p - centre).dot(pw))).collect();
+        let inner = loop2d.iter().map(|&(x, y)| (x * x + y * y).sqrt()).fold(f64::INFINITY, f64::min);
         let reach = 2.0
             * pos
                 .iter()
@@ -544,6 +554,10 @@ impl Wave {
             fallback_normal,
             centre,
             reach,
+            loop2d,
+            plane_u: pu,
+            plane_w: pw,
+            inner,
             stats: Stats::default(),
             relaxed: false,
             corrupt: false,
@@ -936,6 +950,29 @@ impl Wave {
         best.map(|b| b.1)
     }
 
+    /// Does `x` project (onto the loop's best-fit plane) inside the loop or within
+    /// `Avglen / 2` of it? (Winding number; points nearer the centre than every loop
+    /// vertex are inside without it.)
+    fn inside_loop(&self, x: DVec3) -> bool {
+        let d = x - self.centre;
+        let (px, py) = (d.dot(self.plane_u), d.dot(self.plane_w));
+        if (px * px + py * py).sqrt() < self.inner {
+            return true;
+        }
+        let k = self.loop2d.len();
+        let mut wind = 0.0;
+        let mut near = f64::INFINITY;
+        for i in 0..k {
+            let (ax, ay) = (self.loop2d[i].0 - px, self.loop2d[i].1 - py);
+            let (bx, by) = (self.loop2d[(i + 1) % k].0 - px, self.loop2d[(i + 1) % k].1 - py);
+            wind += (ax * by - ay * bx).atan2(ax * bx + ay * by);
+            let (ex, ey) = (bx - ax, by - ay);
+            let t = (-(ax * ex + ay * ey) / (ex * ex + ey * ey).max(1e-300)).clamp(0.0, 1.0);
+            near = near.min(((ax + t * ex).powi(2) + (ay + t * ey).powi(2)).sqrt());
+        }
+        wind.abs() > PI || near < 0.5 * self.len
+    }
+
     /// Is `x` within `clear` of an edge of `front` whose ends are not in `skip`, yet not
     /// near enough to one of its ends to merge? (Edges are found from their ends within
     /// `clear + 1.5 Avglen` of `x`.)
@@ -1006,7 +1043,7 @@ impl Wave {
         let mut chain = vec![Item::Node(pn)];
         let mut merged: Option<u32> = None;
         for &x in &pts {
-            if !x.is_finite() || (x - self.centre).length() > self.reach {
+            if !x.is_finite() || (x - self.centre).length() > self.reach || !self.inside_loop(x) {
                 return None;
             }
             if r > 0.0 {
