@@ -64,8 +64,10 @@
 //!     front is merged into it, splitting the front in two (a front of two vertices is two
 //!     sides of one edge and is zipped); a new point that close to the processed vertex or
 //!     its two neighbours, or within half that distance of a non-adjacent front edge, or
-//!     farther from the loop's centroid than twice the loop's radius plus `2 Avglen`, makes
-//!     that variant invalid;
+//!     farther from the loop's centroid than twice the loop's radius plus `2 Avglen`, or
+//!     projecting (onto the loop's best-fit plane) outside the loop by more than
+//!     `Avglen / 2`, makes that variant invalid (the last rule stops fronts that climb out
+//!     of the hole; it assumes the hole is not a cap over a protrusion);
 //!   - every new triangle must have its smallest angle above `checks.min_angle_deg`, face
 //!     the vertex's expected normal, not overlap (in the vertex's tangent plane, exact
 //!     `orient2d`) any nearby patch triangle or mesh face around the hole, nor cross a
@@ -75,8 +77,9 @@
 //!     vertices whose triangle is flipped, or is a sliver with its longest edge on the loop;
 //!   - if the rule's variant is invalid, the other variants are tried (fewer or more points);
 //!     if none is valid the vertex is put back with a penalty. When every vertex fails, one
-//!     step may use thin triangles (angle bound 0); slivers are flipped away at the end
-//!     where the patch triangle across their longest edge allows. Failing again, or more
+//!     step may use thin triangles (angle bound 0), and a front of at most 10 vertices is
+//!     closed by ear clipping without the overlap tests; slivers are flipped away at the
+//!     end where the patch triangle across their longest edge allows. Failing again, or more
 //!     than `max_steps_per_vertex · k` steps, ends with [`FillError::Failed`], so the
 //!     dispatcher falls back. Closes 1999 of 2000 random star-shaped loops.
 //!
@@ -519,8 +522,14 @@ impl Wave {
         let centre = super::geom::centroid(&pos);
         let pu = fallback_normal.any_orthonormal_vector();
         let pw = fallback_normal.cross(pu);
-        let loop2d: Vec<(f64, f64)> = pos.iter().map(|&p| ((p - centre).dot(pu), (p - centre).dot(pw))).collect();
-        let inner = loop2d.iter().map(|&(x, y)| (x * x + y * y).sqrt()).fold(f64::INFINITY, f64::min);
+        let loop2d: Vec<(f64, f64)> = pos
+            .iter()
+            .map(|&p| ((p - centre).dot(pu), (p - centre).dot(pw)))
+            .collect();
+        let inner = loop2d
+            .iter()
+            .map(|&(x, y)| (x * x + y * y).sqrt())
+            .fold(f64::INFINITY, f64::min);
         let reach = 2.0
             * pos
                 .iter()
@@ -861,7 +870,10 @@ impl Wave {
         }
         let vert = |w: &Wave, n: u32| w.nodes[n as usize].vert;
         let pts: Vec<DVec3> = ring.iter().map(|&n| self.p(n)).collect();
-        let nrm = unit_or(super::geom::newell_normal(&pts), self.expected_normal(start));
+        let nrm = unit_or(
+            super::geom::newell_normal(&pts),
+            self.expected_normal(start),
+        );
         while ring.len() > 3 {
             let m = ring.len();
             let mut best: Option<(bool, f64, usize)> = None;
@@ -964,7 +976,10 @@ impl Wave {
         let mut near = f64::INFINITY;
         for i in 0..k {
             let (ax, ay) = (self.loop2d[i].0 - px, self.loop2d[i].1 - py);
-            let (bx, by) = (self.loop2d[(i + 1) % k].0 - px, self.loop2d[(i + 1) % k].1 - py);
+            let (bx, by) = (
+                self.loop2d[(i + 1) % k].0 - px,
+                self.loop2d[(i + 1) % k].1 - py,
+            );
             wind += (ax * by - ay * bx).atan2(ax * bx + ay * by);
             let (ex, ey) = (bx - ax, by - ay);
             let t = (-(ax * ex + ay * ey) / (ex * ex + ey * ey).max(1e-300)).clamp(0.0, 1.0);
