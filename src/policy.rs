@@ -43,6 +43,8 @@ pub enum Method {
     AdvancingFront,
     /// Plain advancing front, LS-SVM prediction of the Laplacian, Poisson solve (paper 003).
     LssvmPoisson,
+    /// Improved wavefront with curvature restoration (paper 004, Huang et al. 2022).
+    Wavefront,
 }
 
 impl Method {
@@ -52,6 +54,7 @@ impl Method {
         Method::MinAreaFair,
         Method::AdvancingFront,
         Method::LssvmPoisson,
+        Method::Wavefront,
     ];
     /// The policy spelling.
     pub fn name(self) -> &'static str {
@@ -60,6 +63,7 @@ impl Method {
             Method::MinAreaFair => "min_area_fair",
             Method::AdvancingFront => "advancing_front",
             Method::LssvmPoisson => "lssvm_poisson",
+            Method::Wavefront => "wavefront",
         }
     }
 }
@@ -254,6 +258,54 @@ impl Default for Lssvm {
     }
 }
 
+/// Where the wavefront puts a new point out of the vertex's tangent plane.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum WavefrontPlacement {
+    /// In the plane of the two front edges (paper 004 §2.2; interpolated where that
+    /// plane is ill-conditioned).
+    EdgePlane,
+    /// Elevation interpolated between the two front edges' elevations (follows the
+    /// chords; restoration then tends to flatten).
+    Interpolated,
+}
+
+/// The improved wavefront with curvature restoration (paper 004, ALGORITHMS C).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct Wavefront {
+    /// At or below this front angle (degrees) the vertex is closed with one triangle.
+    pub alpha: f64,
+    /// At or below this angle one new point on the bisector; above, two on the trisectors.
+    pub beta: f64,
+    /// When the smallest front angle is at least this (degrees), a front vertex drawn
+    /// at random (from `seed`) is processed instead.
+    pub mu: f64,
+    /// Rotate each new triangle to its expected normal (paper 004 §2.2.1).
+    pub curvature_restoration: bool,
+    /// Out-of-plane placement of new points.
+    pub placement: WavefrontPlacement,
+    /// Give up (and fall back) after this many front steps per boundary vertex.
+    pub max_steps_per_vertex: usize,
+    /// A new point closer than this times the hole's mean boundary edge length to a
+    /// non-adjacent front vertex is merged into it.
+    pub merge_distance: f64,
+}
+
+impl Default for Wavefront {
+    fn default() -> Self {
+        Wavefront {
+            alpha: 75.0,
+            beta: 135.0,
+            mu: 150.0,
+            curvature_restoration: true,
+            placement: WavefrontPlacement::EdgePlane,
+            max_steps_per_vertex: 200,
+            merge_distance: 0.5,
+        }
+    }
+}
+
 impl Lssvm {
     /// Range checks.
     pub fn validate(&self) -> Result<(), Invalid> {
@@ -387,6 +439,7 @@ pub struct Policy {
     pub refine: Refine,
     pub fair: Fair,
     pub front: Front,
+    pub wavefront: Wavefront,
     pub checks: Checks,
     pub limits: Limits,
     pub smooth: Smooth,
