@@ -472,6 +472,19 @@ impl PolicyName for TriangulationWeight {
     }
 }
 
+impl PolicyName for WavefrontPlacement {
+    const VALUES: &'static [WavefrontPlacement] = &[
+        WavefrontPlacement::EdgePlane,
+        WavefrontPlacement::Interpolated,
+    ];
+    fn policy_name(self) -> &'static str {
+        match self {
+            WavefrontPlacement::EdgePlane => "edge_plane",
+            WavefrontPlacement::Interpolated => "interpolated",
+        }
+    }
+}
+
 impl PolicyName for Weights {
     const VALUES: &'static [Weights] = &[Weights::Uniform, Weights::Cotangent, Weights::Fujiwara];
     fn policy_name(self) -> &'static str {
@@ -531,6 +544,18 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
             "merge_distance",
             "max_steps_per_vertex",
             "fair",
+        ],
+    ),
+    (
+        "wavefront",
+        &[
+            "alpha",
+            "beta",
+            "mu",
+            "curvature_restoration",
+            "placement",
+            "max_steps_per_vertex",
+            "merge_distance",
         ],
     ),
     ("checks", &["self_intersection", "min_angle_deg"]),
@@ -793,6 +818,38 @@ impl Policy {
             return Err(Invalid::new(
                 "front.max_steps_per_vertex",
                 format!("must be at least 1 (got {})", f.max_steps_per_vertex),
+            ));
+        }
+
+        let w = &self.wavefront;
+        open("wavefront.alpha", w.alpha, 0.0, 180.0)?;
+        open("wavefront.beta", w.beta, 0.0, 180.0)?;
+        if w.beta <= w.alpha {
+            return Err(Invalid::pair(
+                "wavefront.beta",
+                format!(
+                    "must be greater than wavefront.alpha = {} (got {})",
+                    w.alpha, w.beta
+                ),
+                "wavefront.alpha",
+                format!(
+                    "must be less than wavefront.beta = {} (got {})",
+                    w.beta, w.alpha
+                ),
+            ));
+        }
+        finite("wavefront.mu", w.mu)?;
+        if !(w.mu > 0.0 && w.mu <= 180.0) {
+            return Err(Invalid::new(
+                "wavefront.mu",
+                format!("must be greater than 0 and at most 180 (got {})", w.mu),
+            ));
+        }
+        closed("wavefront.merge_distance", w.merge_distance, 0.0, 1.0)?;
+        if w.max_steps_per_vertex < 1 {
+            return Err(Invalid::new(
+                "wavefront.max_steps_per_vertex",
+                format!("must be at least 1 (got {})", w.max_steps_per_vertex),
             ));
         }
 
@@ -1146,6 +1203,17 @@ impl Reader<'_> {
                 p.front.max_steps_per_vertex = self.usize(key, v)?
             }
             ("front", "fair") => p.front.fair = self.boolean(key, v)?,
+            ("wavefront", "alpha") => p.wavefront.alpha = self.float(key, v)?,
+            ("wavefront", "beta") => p.wavefront.beta = self.float(key, v)?,
+            ("wavefront", "mu") => p.wavefront.mu = self.float(key, v)?,
+            ("wavefront", "curvature_restoration") => {
+                p.wavefront.curvature_restoration = self.boolean(key, v)?
+            }
+            ("wavefront", "placement") => p.wavefront.placement = self.named(key, v)?,
+            ("wavefront", "max_steps_per_vertex") => {
+                p.wavefront.max_steps_per_vertex = self.usize(key, v)?
+            }
+            ("wavefront", "merge_distance") => p.wavefront.merge_distance = self.float(key, v)?,
             ("lssvm", "rings") => p.lssvm.rings = self.usize(key, v)?,
             ("lssvm", "gamma") => p.lssvm.gamma = self.float(key, v)?,
             ("lssvm", "kernel_width") => p.lssvm.kernel_width = self.float(key, v)?,
@@ -1814,6 +1882,7 @@ mod tests {
                     angle_small: angles.0, angle_large: angles.1, alpha, omega1, merge_distance,
                     max_steps_per_vertex, fair: front_fair,
                 },
+                wavefront: Wavefront::default(),
                 checks: Checks { self_intersection, min_angle_deg },
                 limits: Limits { hole_time_ms },
                 smooth: Smooth {
