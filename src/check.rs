@@ -3,6 +3,7 @@
 //! the mesh stays edge-manifold and consistently oriented), and no new triangle
 //! intersects another triangle of the mesh or of the patch.
 
+use crate::bvh::{boxes_meet, tri_box, Bvh};
 use crate::fill::geom;
 use crate::fill::Patch;
 use crate::mesh::{Mesh, VertexId};
@@ -22,18 +23,44 @@ pub enum CheckFailure {
     SelfIntersection(usize, String),
 }
 
-/// Holds what the checks need across holes (the spatial index of the mesh).
+/// Holds what the checks need across holes: a bounding-volume hierarchy over the
+/// mesh's faces at construction, and a second, smaller one over the faces committed
+/// since (rebuilt as it grows), with a short tail of faces scanned linearly.
 pub struct Checker {
-    _private: (),
+    /// Tree over the faces the mesh had at construction.
+    base: Bvh,
+    /// Faces indexed after construction, in the order they were committed.
+    committed: Vec<u32>,
+    /// Tree over `committed[..extra_len]`; the rest is scanned linearly.
+    extra: Bvh,
+    extra_len: usize,
+    /// First face index not yet in `base` or `committed`.
+    next_unseen: usize,
 }
 
+/// The linear tail of committed faces may grow to this before the tree is rebuilt
+/// (or to an eighth of the tree's size, whichever is larger).
+const TAIL_MIN: usize = 64;
+
 impl Checker {
-    /// Prepares the checks for a mesh.
-    pub fn new(_mesh: &Mesh) -> Checker {
-        Checker { _private: () }
+    /// Prepares the checks for a mesh: builds the tree over its faces.
+    pub fn new(mesh: &Mesh) -> Checker {
+        let nf = mesh.num_faces();
+        let base = Bvh::build(nf, |f| face_box(mesh, f));
+        Checker {
+            base,
+            committed: Vec::new(),
+            extra: Bvh::default(),
+            extra_len: 0,
+            next_unseen: nf,
+        }
     }
 
     /// Checks a patch for a hole; on success returns its quality.
+    ///
+    /// Order: topology (an oriented disk closing the loop exactly), degenerate
+    /// triangles, then, with `opts.self_intersection`, intersections of every patch
+    /// triangle with the other patch triangles and with every face of the mesh.
     pub fn check_patch(
         &self,
         mesh: &Mesh,
@@ -41,14 +68,383 @@ impl Checker {
         patch: &Patch,
         opts: &Checks,
     ) -> Result<PatchQuality, CheckFailure> {
+        if let Some(v) = hole.iter().find(|v| v.idx() >= mesh.num_vertices()) {
+            return Err(CheckFailure::Topology(format!(
+                "hole vertex {v} is not in the mesh"
+            )));
+        }
         check_topology(mesh, hole, patch)?;
         let pos = patch_positions(mesh, hole, patch);
         check_degenerate(&pos, patch, opts)?;
+        if opts.self_intersection {
+            self.check_intersections(mesh, hole, patch, &pos)?;
+        }
         Ok(quality(&pos, hole.len(), patch))
     }
 
-    /// Records that the faces in `faces` (indices into the mesh) were added.
-    pub fn commit(&mut self, _mesh: &Mesh, _faces: std::ops::Range<usize>) {}
+    /// Records that the faces in `faces` (indices into the mesh) were added. Faces
+    /// appended to the mesh earlier without a commit are indexed too, so every face
+    /// of the mesh is always checked against.
+    pub fn commit(&mut self, mesh: &Mesh, faces: std::ops::Range<usize>) {
+        let end = faces.end.max(self.next_unseen).min(mesh.num_faces());
+        for f in self.next_unseen..end {
+            self.committed.push(f as u32);
+        }
+        self.next_unseen = self.next_unseen.max(end);
+        let tail = self.committed.len() - self.extra_len;
+        if tail > TAIL_MIN.max(self.extra_len / 8) {
+            let list = &self.committed;
+            self.extra = Bvh::build(list.len(), |i| face_box(mesh, list[i] as usize));
+            self.extra_len = list.len();
+        }
+    }
+
+    /// The self-intersection check (see [`tri_tri`] for the rules on shared vertices).
+    fn check_intersections(
+        &self,
+        mesh: &Mesh,
+        hole: &[VertexId],
+        patch: &Patch,
+        pos: &[DVec3],
+    ) -> Result<(), CheckFailure> {
+        let k = hole.len();
+        let keys: Vec<u64> = (0..pos.len())
+            .map(|i| {
+                if i < k {
+                    vertex_key(mesh, hole[i])
+                } else {
+                    NEW_KEY + (i - k) as u64
+                }
+            })
+            .collect();
+        let tris: Vec<([DVec3; 3], [u64; 3])> = patch
+            .triangles
+            .iter()
+            .map(|t| (t.map(|i| pos[i as usize]), t.map(|i| keys[i as usize])))
+            .collect();
+        let boxes: Vec<(DVec3, DVec3)> = tris.iter().map(|(p, _)| tri_box(p)).collect();
+        // patch against patch
+        let ptree = Bvh::build(tris.len(), |i| boxes[i]);
+        for (i, (p, pk)) in tris.iter().enumerate() {
+            let mut hit = None;
+            ptree.query(boxes[i].0, boxes[i].1, |j| {
+                if j > i && boxes_meet(boxes[i].0, boxes[i].1, boxes[j].0, boxes[j].1) {
+                    let (q, qk) = &tris[j];
+                    if tri_tri(p, pk, q, qk) {
+                        hit = Some(j);
+                        return true;
+                    }
+                }
+                false
+            });
+            if let Some(j) = hit {
+                return Err(CheckFailure::SelfIntersection(
+                    i,
+                    format!("patch triangle {j}"),
+                ));
+            }
+        }
+        // patch against mesh
+        for (i, (p, pk)) in tris.iter().enumerate() {
+            let (lo, hi) = boxes[i];
+            let mut hit = None;
+            let mut test = |f: usize| -> bool {
+                if let Some((q, qk)) = face_tri(mesh, f) {
+                    let (qlo, qhi) = tri_box(&q);
+                    if boxes_meet(lo, hi, qlo, qhi) && tri_tri(p, pk, &q, &qk) {
+                        hit = Some(f);
+                        return true;
+                    }
+                }
+                false
+            };
+            let found = self.base.query(lo, hi, &mut test)
+                || self
+                    .extra
+                    .query(lo, hi, |j| test(self.committed[j] as usize))
+                || self.committed[self.extra_len..]
+                    .iter()
+                    .any(|&f| test(f as usize))
+                || (self.next_unseen..mesh.num_faces()).any(&mut test);
+            if found {
+                if let Some(f) = hit {
+                    return Err(CheckFailure::SelfIntersection(i, format!("mesh face {f}")));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Keys of new patch vertices start here (mesh vertex keys are below 2^32).
+const NEW_KEY: u64 = 1 << 32;
+
+/// The identity of a mesh vertex for the shared-vertex rules: the input vertex it
+/// stands for (copies made by the builder when it split a non-manifold vertex are
+/// the same point), as long as it still sits exactly where that vertex sits.
+fn vertex_key(mesh: &Mesh, v: VertexId) -> u64 {
+    if let Some(Some(o)) = mesh.origin.get(v.idx()) {
+        if let (Some(a), Some(b)) = (mesh.positions.get(o.idx()), mesh.positions.get(v.idx())) {
+            if a.to_array().map(f64::to_bits) == b.to_array().map(f64::to_bits) {
+                return o.idx() as u64;
+            }
+        }
+    }
+    v.idx() as u64
+}
+
+/// Corners and vertex keys of mesh face `f` (`None` when out of range).
+fn face_tri(mesh: &Mesh, f: usize) -> Option<([DVec3; 3], [u64; 3])> {
+    let vs = mesh.topo.faces().get(f)?;
+    let mut p = [DVec3::ZERO; 3];
+    for c in 0..3 {
+        p[c] = *mesh.positions.get(vs[c].idx())?;
+    }
+    Some((p, vs.map(|v| vertex_key(mesh, v))))
+}
+
+/// Bounding box of mesh face `f` (an empty box when out of range).
+fn face_box(mesh: &Mesh, f: usize) -> (DVec3, DVec3) {
+    let pos = &mesh.positions;
+    match mesh.topo.faces().get(f) {
+        Some(&[a, b, c]) => match (pos.get(a.idx()), pos.get(b.idx()), pos.get(c.idx())) {
+            (Some(&a), Some(&b), Some(&c)) => (a.min(b).min(c), a.max(b).max(c)),
+            _ => (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        },
+        None => (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Exact triangle-triangle intersection.
+//
+// Every predicate is a sign of `robust::orient3d` / `robust::orient2d` (Shewchuk's
+// adaptive exact predicates), so the answers are exact for the f64 coordinates.
+// The test is the edge form of the classic one: two closed triangles meet iff an
+// edge of one meets the other (their intersection, if not empty, is a convex set
+// whose extreme points lie on the boundary of one of them), which also covers
+// degenerate (collinear) triangles, whose point set is the union of their edges.
+
+type P3 = DVec3;
+
+#[inline]
+fn o3(a: P3, b: P3, c: P3, d: P3) -> f64 {
+    let k = |p: P3| robust::Coord3D {
+        x: p.x,
+        y: p.y,
+        z: p.z,
+    };
+    robust::orient3d(k(a), k(b), k(c), k(d))
+}
+
+/// A point projected by dropping coordinate `drop`.
+#[inline]
+fn pr(p: P3, drop: usize) -> robust::Coord<f64> {
+    match drop {
+        0 => robust::Coord { x: p.y, y: p.z },
+        1 => robust::Coord { x: p.z, y: p.x },
+        _ => robust::Coord { x: p.x, y: p.y },
+    }
+}
+
+#[inline]
+fn o2(a: P3, b: P3, c: P3, drop: usize) -> f64 {
+    robust::orient2d(pr(a, drop), pr(b, drop), pr(c, drop))
+}
+
+/// A coordinate to drop so that the triangle's projection is not degenerate (the
+/// projection is then a bijection of the triangle's plane), `None` for a degenerate
+/// (collinear) triangle. The best-conditioned axis is tried first.
+fn proj_axis(a: P3, b: P3, c: P3) -> Option<usize> {
+    let n = (b - a).cross(c - a).abs();
+    let first = if n.x >= n.y && n.x >= n.z {
+        0
+    } else if n.y >= n.z {
+        1
+    } else {
+        2
+    };
+    [first, (first + 1) % 3, (first + 2) % 3]
+        .into_iter()
+        .find(|&d| o2(a, b, c, d) != 0.0)
+}
+
+/// `p` lies in the closed box of `a`, `b` (used for collinear points only).
+fn in_span(a: P3, b: P3, p: P3) -> bool {
+    (0..3).all(|i| a[i].min(b[i]) <= p[i] && p[i] <= a[i].max(b[i]))
+}
+
+/// Closed segments `ab` and `cd` meet; all four points coplanar, projected by `drop`.
+fn seg_seg2(a: P3, b: P3, c: P3, d: P3, drop: usize) -> bool {
+    let d1 = o2(c, d, a, drop);
+    let d2 = o2(c, d, b, drop);
+    let d3 = o2(a, b, c, drop);
+    let d4 = o2(a, b, d, drop);
+    if ((d1 > 0.0 && d2 < 0.0) || (d1 < 0.0 && d2 > 0.0))
+        && ((d3 > 0.0 && d4 < 0.0) || (d3 < 0.0 && d4 > 0.0))
+    {
+        return true;
+    }
+    (d1 == 0.0 && in_span(c, d, a))
+        || (d2 == 0.0 && in_span(c, d, b))
+        || (d3 == 0.0 && in_span(a, b, c))
+        || (d4 == 0.0 && in_span(a, b, d))
+}
+
+/// `p` lies in the closed triangle `t` (coplanar, non-degenerate in projection `drop`).
+fn in_tri2(p: P3, t: &[P3; 3], drop: usize) -> bool {
+    let s = [
+        o2(t[0], t[1], p, drop),
+        o2(t[1], t[2], p, drop),
+        o2(t[2], t[0], p, drop),
+    ];
+    !(s.iter().any(|&x| x > 0.0) && s.iter().any(|&x| x < 0.0))
+}
+
+/// Closed segment `st` meets the closed non-degenerate triangle `t`.
+fn seg_tri(s: P3, e: P3, t: &[P3; 3]) -> bool {
+    let [a, b, c] = *t;
+    let os = o3(a, b, c, s);
+    let oe = o3(a, b, c, e);
+    if (os > 0.0 && oe > 0.0) || (os < 0.0 && oe < 0.0) {
+        return false;
+    }
+    if os == 0.0 && oe == 0.0 {
+        let Some(drop) = proj_axis(a, b, c) else {
+            return false;
+        };
+        return in_tri2(s, t, drop)
+            || in_tri2(e, t, drop)
+            || seg_seg2(s, e, a, b, drop)
+            || seg_seg2(s, e, b, c, drop)
+            || seg_seg2(s, e, c, a, drop);
+    }
+    // the segment crosses (or touches) the plane at one point: it lies in the
+    // triangle iff the line se passes on the same side of all three edges
+    let v = [o3(s, e, a, b), o3(s, e, b, c), o3(s, e, c, a)];
+    !(v.iter().any(|&x| x > 0.0) && v.iter().any(|&x| x < 0.0))
+}
+
+/// Closed segments `ab` and `cd` in space meet.
+fn seg_seg3(a: P3, b: P3, c: P3, d: P3) -> bool {
+    if o3(a, b, c, d) != 0.0 {
+        return false;
+    }
+    for (x, y, z) in [(a, b, c), (a, b, d), (a, c, d), (b, c, d)] {
+        if let Some(drop) = proj_axis(x, y, z) {
+            return seg_seg2(a, b, c, d, drop);
+        }
+    }
+    // all four points on one line: compare along the axis where they spread most
+    let lo = a.min(b).min(c).min(d);
+    let hi = a.max(b).max(c).max(d);
+    let ext = hi - lo;
+    let i = if ext.x >= ext.y && ext.x >= ext.z {
+        0
+    } else if ext.y >= ext.z {
+        1
+    } else {
+        2
+    };
+    a[i].min(b[i]) <= c[i].max(d[i]) && c[i].min(d[i]) <= a[i].max(b[i])
+}
+
+/// Closed triangles `p` and `q` (no shared vertices) meet.
+pub fn tri_tri_plain(p: &[P3; 3], q: &[P3; 3]) -> bool {
+    let pa = proj_axis(p[0], p[1], p[2]);
+    let qa = proj_axis(q[0], q[1], q[2]);
+    let edges = |t: &[P3; 3]| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])];
+    match (pa, qa) {
+        (Some(_), Some(_)) => {
+            // early out: all of one triangle strictly on one side of the other's plane
+            let side = |t: &[P3; 3], u: &[P3; 3]| {
+                let s = u.map(|x| o3(t[0], t[1], t[2], x));
+                s.iter().all(|&x| x > 0.0) || s.iter().all(|&x| x < 0.0)
+            };
+            if side(p, q) || side(q, p) {
+                return false;
+            }
+            edges(p).iter().any(|&(s, e)| seg_tri(s, e, q))
+                || edges(q).iter().any(|&(s, e)| seg_tri(s, e, p))
+        }
+        (Some(_), None) => edges(q).iter().any(|&(s, e)| seg_tri(s, e, p)),
+        (None, Some(_)) => edges(p).iter().any(|&(s, e)| seg_tri(s, e, q)),
+        (None, None) => edges(p)
+            .iter()
+            .any(|&(a, b)| edges(q).iter().any(|&(c, d)| seg_seg3(a, b, c, d))),
+    }
+}
+
+/// Triangle `p` (keys `pk`) and triangle `q` (keys `qk`) intersect, under CGAL's
+/// convention for triangles sharing vertices (equal keys = the same vertex):
+/// - no shared vertex: the closed triangles meet;
+/// - one shared vertex `w`: they meet somewhere other than `w` (iff the edge of one
+///   opposite `w` meets the other triangle);
+/// - two shared vertices (a shared edge): they overlap beyond the edge, which for
+///   non-degenerate triangles means coplanar with both far vertices strictly on the
+///   same side of the edge (a fold);
+/// - three: the same triangle, always an intersection.
+///
+/// `p` must be non-degenerate (patch triangles are checked for that first); a
+/// degenerate `p` is reported as intersecting whenever it shares a vertex.
+/// `q` may be degenerate (a zero-area face of the input).
+pub fn tri_tri(p: &[P3; 3], pk: &[u64; 3], q: &[P3; 3], qk: &[u64; 3]) -> bool {
+    let shared: Vec<(usize, usize)> = (0..3)
+        .flat_map(|i| (0..3).filter(move |&j| pk[i] == qk[j]).map(move |j| (i, j)))
+        .collect();
+    match shared.len() {
+        0 => tri_tri_plain(p, q),
+        1 => {
+            let (i, j) = shared[0];
+            let w = p[i];
+            let (p1, p2) = (p[(i + 1) % 3], p[(i + 2) % 3]);
+            let (q1, q2) = (q[(j + 1) % 3], q[(j + 2) % 3]);
+            if proj_axis(p[0], p[1], p[2]).is_none() {
+                return true;
+            }
+            if proj_axis(q[0], q[1], q[2]).is_some() {
+                return seg_tri(p1, p2, q) || seg_tri(q1, q2, p);
+            }
+            // q is a segment through w: it meets p beyond w iff one of its two
+            // pieces from w runs into p
+            [q1, q2]
+                .into_iter()
+                .any(|x| x != w && ray_enters(w, x, p1, p2))
+        }
+        2 => {
+            let (i0, j0) = shared[0];
+            let (i1, j1) = shared[1];
+            let (u, v) = (p[i0], p[i1]);
+            let pf = p[3 - i0 - i1];
+            let qf = q[3 - j0 - j1];
+            let Some(drop) = proj_axis(p[0], p[1], p[2]) else {
+                return true;
+            };
+            if o3(u, v, pf, qf) != 0.0 {
+                return false;
+            }
+            let a = o2(u, v, pf, drop);
+            let b = o2(u, v, qf, drop);
+            (a > 0.0 && b > 0.0) || (a < 0.0 && b < 0.0)
+        }
+        _ => true,
+    }
+}
+
+/// The segment from `w` (a corner of the non-degenerate triangle `w p1 p2`) to `x`
+/// meets the triangle at a point other than `w`.
+fn ray_enters(w: P3, x: P3, p1: P3, p2: P3) -> bool {
+    if o3(w, p1, p2, x) != 0.0 {
+        return false; // crosses the plane at w only
+    }
+    let Some(drop) = proj_axis(w, p1, p2) else {
+        return true;
+    };
+    // direction x - w inside the closed angle p1 w p2
+    let turn = o2(w, p1, p2, drop).signum();
+    let a = o2(w, p1, x, drop) * turn;
+    let b = o2(w, x, p2, drop) * turn;
+    a >= 0.0 && b >= 0.0
 }
 
 /// Positions of every patch vertex (loop first, then new).
@@ -80,11 +476,16 @@ pub fn check_topology(mesh: &Mesh, hole: &[VertexId], patch: &Patch) -> Result<(
         }
         for c in 0..3 {
             if !directed.insert((t[c], t[(c + 1) % 3])) {
-                return err(format!("edge {}-{} is used twice in one direction", t[c], t[(c + 1) % 3]));
+                return err(format!(
+                    "edge {}-{} is used twice in one direction",
+                    t[c],
+                    t[(c + 1) % 3]
+                ));
             }
         }
     }
-    let is_loop_edge = |a: u32, b: u32| (a as usize) < k && (b as usize) < k && (a as usize + 1) % k == b as usize;
+    let is_loop_edge =
+        |a: u32, b: u32| (a as usize) < k && (b as usize) < k && (a as usize + 1) % k == b as usize;
     let mut edges = 0usize;
     for &(a, b) in &directed {
         if is_loop_edge(a, b) {
@@ -92,7 +493,9 @@ pub fn check_topology(mesh: &Mesh, hole: &[VertexId], patch: &Patch) -> Result<(
             continue;
         }
         if is_loop_edge(b, a) {
-            return err(format!("boundary edge {b}-{a} is covered with the wrong orientation"));
+            return err(format!(
+                "boundary edge {b}-{a} is covered with the wrong orientation"
+            ));
         }
         if !directed.contains(&(b, a)) {
             return err(format!("edge {a}-{b} is left open"));
@@ -126,6 +529,28 @@ pub fn check_topology(mesh: &Mesh, hole: &[VertexId], patch: &Patch) -> Result<(
     let chi = n as i64 - edges as i64 + patch.triangles.len() as i64;
     if chi != 1 {
         return err(format!("patch is not a disk (Euler characteristic {chi})"));
+    }
+    // connected: otherwise a disk plus a closed torus of new vertices has chi = 1 too
+    let mut parent: Vec<usize> = (0..n).collect();
+    fn root(parent: &mut [usize], mut x: usize) -> usize {
+        while parent[x] != x {
+            parent[x] = parent[parent[x]];
+            x = parent[x];
+        }
+        x
+    }
+    for t in &patch.triangles {
+        for c in 1..3 {
+            let (a, b) = (
+                root(&mut parent, t[0] as usize),
+                root(&mut parent, t[c] as usize),
+            );
+            parent[a] = b;
+        }
+    }
+    let r0 = root(&mut parent, 0);
+    if let Some(i) = (1..n).find(|&i| root(&mut parent, i) != r0) {
+        return err(format!("vertex {i} is not connected to the hole's loop"));
     }
     // every vertex must have a single fan (no pinched vertex inside the patch)
     let mut by_vertex: HashMap<u32, Vec<(u32, u32)>> = HashMap::new();
@@ -171,13 +596,16 @@ pub fn check_degenerate(pos: &[DVec3], patch: &Patch, opts: &Checks) -> Result<(
         let [a, b, c] = t.map(|i| pos[i as usize]);
         let l = (b - a).length().max((c - b).length()).max((a - c).length());
         let area = geom::tri_area(a, b, c);
-        if !(area > 1e-12 * l * l) {
+        if area.is_nan() || area <= 1e-12 * l * l {
             return Err(CheckFailure::Degenerate(ti, format!("area {area:e}")));
         }
         let ang = geom::angles(a, b, c);
         let m = ang[0].min(ang[1]).min(ang[2]);
         if m < min_angle {
-            return Err(CheckFailure::Degenerate(ti, format!("smallest angle {:.3} deg", m.to_degrees())));
+            return Err(CheckFailure::Degenerate(
+                ti,
+                format!("smallest angle {:.3} deg", m.to_degrees()),
+            ));
         }
     }
     Ok(())
@@ -218,7 +646,516 @@ pub fn quality(pos: &[DVec3], k: usize, patch: &Patch) -> PatchQuality {
         } else {
             good as f64 / patch.triangles.len() as f64
         },
-        min_angle_deg: if min_angle.is_finite() { min_angle.to_degrees() } else { 0.0 },
+        min_angle_deg: if min_angle.is_finite() {
+            min_angle.to_degrees()
+        } else {
+            0.0
+        },
         valence6_share,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::RawMesh;
+    use proptest::prelude::*;
+
+    fn v(x: f64, y: f64, z: f64) -> DVec3 {
+        DVec3::new(x, y, z)
+    }
+
+    const NONE: [u64; 3] = [10, 11, 12];
+    const OTHER: [u64; 3] = [20, 21, 22];
+
+    fn plain(p: [DVec3; 3], q: [DVec3; 3]) -> bool {
+        tri_tri(&p, &NONE, &q, &OTHER)
+    }
+
+    #[test]
+    fn disjoint_and_crossing() {
+        let p = [v(0., 0., 0.), v(1., 0., 0.), v(0., 1., 0.)];
+        assert!(!plain(p, [v(0., 0., 1.), v(1., 0., 1.), v(0., 1., 1.)]));
+        // q's plane cuts p's plane but q's segment there misses p
+        assert!(!plain(p, [v(2., 2., -1.), v(3., 2., 1.), v(2., 3., 1.)]));
+        // q pierces p
+        assert!(plain(
+            p,
+            [v(0.2, 0.2, -1.), v(0.3, 0.2, 1.), v(0.2, 0.3, 1.)]
+        ));
+        // q straddles p's edge: a bar through the middle
+        assert!(plain(
+            p,
+            [v(-1., 0.3, -0.5), v(2., 0.3, -0.5), v(0.1, 0.3, 0.5)]
+        ));
+    }
+
+    #[test]
+    fn touching_counts_unless_shared() {
+        let p = [v(0., 0., 0.), v(1., 0., 0.), v(0., 1., 0.)];
+        // q's corner touches the middle of p's edge from above: a real contact
+        let q = [v(0.5, 0.0, 0.0), v(0.5, -1.0, 1.0), v(0.6, -1.0, 1.0)];
+        assert!(plain(p, q));
+        // the same corner coordinates, but a shared vertex, touch only there
+        let q = [v(0., 0., 0.), v(-1., -1., 1.), v(-1., 0., 1.)];
+        assert!(plain(p, q)); // not shared: touching at a point is an intersection
+        assert!(!tri_tri(&p, &[1, 2, 3], &q, &[1, 5, 6]));
+        // shared vertex, but q's far edge passes through p
+        let q = [v(0., 0., 0.), v(0.3, 0.3, -1.), v(0.3, 0.3, 1.)];
+        assert!(tri_tri(&p, &[1, 2, 3], &q, &[1, 5, 6]));
+        // shared vertex, coplanar, q inside p's angle
+        let q = [v(0., 0., 0.), v(0.2, 0.1, 0.), v(0.1, 0.2, 0.)];
+        assert!(tri_tri(&p, &[1, 2, 3], &q, &[1, 5, 6]));
+        // shared vertex, coplanar, q outside p's angle
+        let q = [v(0., 0., 0.), v(-0.2, -0.1, 0.), v(-0.1, -0.2, 0.)];
+        assert!(!tri_tri(&p, &[1, 2, 3], &q, &[1, 5, 6]));
+        // shared vertex, coplanar, q's edge runs along p's edge
+        let q = [v(0., 0., 0.), v(0.5, 0., 0.), v(0.5, -1., 0.)];
+        assert!(tri_tri(&p, &[1, 2, 3], &q, &[1, 5, 6]));
+    }
+
+    #[test]
+    fn shared_edge_rules() {
+        let p = [v(0., 0., 0.), v(1., 0., 0.), v(0.5, 1., 0.)];
+        let pk = [1, 2, 3];
+        let qk = [2, 1, 9];
+        // flat continuation on the other side: no intersection
+        assert!(!tri_tri(
+            &p,
+            &pk,
+            &[v(1., 0., 0.), v(0., 0., 0.), v(0.5, -1., 0.)],
+            &qk
+        ));
+        // hinge (not coplanar): only the edge is shared
+        assert!(!tri_tri(
+            &p,
+            &pk,
+            &[v(1., 0., 0.), v(0., 0., 0.), v(0.5, 0.5, 1.)],
+            &qk
+        ));
+        // coplanar fold onto p: overlap beyond the edge
+        assert!(tri_tri(
+            &p,
+            &pk,
+            &[v(1., 0., 0.), v(0., 0., 0.), v(0.2, 0.3, 0.)],
+            &qk
+        ));
+        // fold by a hair off the plane: exact, so no intersection
+        assert!(!tri_tri(
+            &p,
+            &pk,
+            &[v(1., 0., 0.), v(0., 0., 0.), v(0.2, 0.3, 1e-300)],
+            &qk
+        ));
+        // the same triangle twice
+        assert!(tri_tri(&p, &pk, &[p[1], p[2], p[0]], &[2, 3, 1]));
+    }
+
+    #[test]
+    fn coplanar_cases() {
+        let p = [v(0., 0., 0.), v(2., 0., 0.), v(0., 2., 0.)];
+        assert!(plain(p, [v(0.5, 0.5, 0.), v(3., 0.5, 0.), v(0.5, 3., 0.)]));
+        // q inside p
+        assert!(plain(
+            p,
+            [v(0.2, 0.2, 0.), v(0.5, 0.2, 0.), v(0.2, 0.5, 0.)]
+        ));
+        // p inside q
+        assert!(plain(p, [v(-1., -1., 0.), v(9., -1., 0.), v(-1., 9., 0.)]));
+        // beside each other, touching along part of an edge
+        assert!(plain(p, [v(1., 1., 0.), v(3., 1., 0.), v(1., 3., 0.)]));
+        // beside each other, apart
+        assert!(!plain(p, [v(1.1, 1.1, 0.), v(3., 1.1, 0.), v(1.1, 3., 0.)]));
+        // in a tilted plane, where no coordinate plane is the triangle's
+        let m = |x: DVec3| v(x.x + 0.3 * x.y, x.y, 0.7 * x.x - 0.2 * x.y);
+        let p2 = p.map(m);
+        assert!(plain(
+            p2,
+            [v(0.2, 0.2, 0.), v(0.5, 0.2, 0.), v(0.2, 0.5, 0.)].map(m)
+        ));
+        assert!(!plain(
+            p2,
+            [v(1.1, 1.1, 0.), v(3., 1.1, 0.), v(1.1, 3., 0.)].map(m)
+        ));
+    }
+
+    #[test]
+    fn near_parallel_is_exact() {
+        let p = [v(0., 0., 0.), v(1., 0., 0.), v(0., 1., 0.)];
+        // almost parallel, one corner a hair below the plane over p: crosses p
+        let q = [v(0.1, 0.1, -1e-30), v(5., 0.2, 1e-20), v(0.2, 5., 1e-20)];
+        assert!(plain(p, q));
+        // the same but the corner a hair above: all of q above p's plane
+        let q = [v(0.1, 0.1, 1e-30), v(5., 0.2, 1e-20), v(0.2, 5., 1e-20)];
+        assert!(!plain(p, q));
+        // crossing p's plane only outside p
+        let q = [v(1.0, 1.0, -1e-30), v(5., 0.2, 1e-20), v(0.2, 5., 1e-20)];
+        assert!(!plain(p, q));
+    }
+
+    #[test]
+    fn degenerate_other_triangle() {
+        let p = [v(0., 0., 0.), v(1., 0., 0.), v(0., 1., 0.)];
+        // a needle (collinear) through p
+        let q = [v(0.2, 0.2, -1.), v(0.2, 0.2, 0.5), v(0.2, 0.2, 1.)];
+        assert!(plain(p, q));
+        let q = [v(2., 2., -1.), v(2., 2., 0.5), v(2., 2., 1.)];
+        assert!(!plain(p, q));
+        // a needle sharing p's corner, lying along p's edge: overlap beyond the corner
+        let q = [v(0., 0., 0.), v(0.5, 0., 0.), v(0.25, 0., 0.)];
+        assert!(tri_tri(&p, &[1, 2, 3], &q, &[1, 5, 6]));
+        // a needle through the shared corner, pointing away on both sides in the plane
+        let q = [v(0., 0., 0.), v(-0.5, 0.1, 0.), v(0.5, -0.1, 0.)];
+        assert!(!tri_tri(&p, &[1, 2, 3], &q, &[1, 5, 6]));
+        // ... and one that points into p on one side
+        let q = [v(0., 0., 0.), v(-0.5, -0.5, 0.), v(0.5, 0.5, 0.)];
+        assert!(tri_tri(&p, &[1, 2, 3], &q, &[1, 5, 6]));
+        // two needles
+        assert!(tri_tri_plain(
+            &[v(0., 0., 0.), v(1., 1., 1.), v(2., 2., 2.)],
+            &[v(0., 2., 0.), v(2., 0., 2.), v(1., 1., 1.)]
+        ));
+        assert!(!tri_tri_plain(
+            &[v(0., 0., 0.), v(1., 1., 1.), v(2., 2., 2.)],
+            &[v(3., 3., 3.), v(4., 4., 4.), v(5., 5., 5.)]
+        ));
+        assert!(tri_tri_plain(
+            &[v(0., 0., 0.), v(1., 1., 1.), v(2., 2., 2.)],
+            &[v(2., 2., 2.), v(4., 4., 4.), v(5., 5., 5.)]
+        ));
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(256))]
+        /// The answer does not depend on the order of the triangles or their corners;
+        /// and on small integer grids (many touching and coplanar cases) it agrees
+        /// with a dense sampling reference when the reference finds a common point.
+        #[test]
+        fn symmetric_and_order_free(c in prop::array::uniform18(-3i32..4)) {
+            let t = |o: usize| [0, 1, 2].map(|i| v(c[o + 3 * i] as f64, c[o + 3 * i + 1] as f64, c[o + 3 * i + 2] as f64));
+            let (p, q) = (t(0), t(9));
+            let r = tri_tri_plain(&p, &q);
+            prop_assert_eq!(r, tri_tri_plain(&q, &p));
+            prop_assert_eq!(r, tri_tri_plain(&[p[1], p[2], p[0]], &[q[2], q[1], q[0]]));
+            // sampled points of p (barycentric grid) that lie exactly in q imply r
+            let n = 8;
+            for i in 0..=n {
+                for j in 0..=(n - i) {
+                    let x = p[0] + (p[1] - p[0]) * (i as f64 / n as f64) + (p[2] - p[0]) * (j as f64 / n as f64);
+                    if proj_axis(q[0], q[1], q[2]).is_some() && x.is_finite() {
+                        let d = o3(q[0], q[1], q[2], x);
+                        let inside = d == 0.0 && seg_tri(x, x, &q);
+                        if inside {
+                            prop_assert!(r);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    // ---- whole-patch checks -------------------------------------------------
+
+    /// A torus of 3 x 3 new vertices: closed, every vertex a single fan, chi = 0.
+    fn torus(base: u32) -> Vec<[u32; 3]> {
+        let id = |i: u32, j: u32| base + (j % 3) * 3 + (i % 3);
+        let mut t = Vec::new();
+        for j in 0..3 {
+            for i in 0..3 {
+                t.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+                t.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+        t
+    }
+
+    #[test]
+    fn topology_rejects_extra_closed_components() {
+        let mut raw = RawMesh::default();
+        grid(6, 0.0, 0, &HOLE, &mut raw);
+        let (m, _) = Mesh::from_raw(&raw);
+        let hole = hole_at(&m, 0.0);
+        let mut p = fan(&hole, v(3., 3., 0.));
+        check_topology(&m, &hole, &p).unwrap();
+        let base = (hole.len() + 1) as u32;
+        p.triangles.extend(torus(base));
+        for i in 0..9 {
+            p.new_vertices.push(v(10. + i as f64, 0., 0.));
+        }
+        let e = check_topology(&m, &hole, &p).unwrap_err();
+        assert!(e.to_string().contains("not connected"), "{e}");
+    }
+
+    #[test]
+    fn topology_rejects_open_and_misoriented_patches() {
+        let mut raw = RawMesh::default();
+        grid(6, 0.0, 0, &HOLE, &mut raw);
+        let (m, _) = Mesh::from_raw(&raw);
+        let hole = hole_at(&m, 0.0);
+        let good = fan(&hole, v(3., 3., 0.));
+        let mut open = good.clone();
+        open.triangles.pop();
+        assert!(check_topology(&m, &hole, &open).is_err());
+        let mut flipped = good.clone();
+        for t in &mut flipped.triangles {
+            t.swap(0, 1);
+        }
+        assert!(check_topology(&m, &hole, &flipped).is_err());
+        let mut oob = good.clone();
+        oob.triangles[0][2] = 99;
+        assert!(check_topology(&m, &hole, &oob).is_err());
+        let mut nan = good;
+        nan.new_vertices[0].x = f64::NAN;
+        assert!(check_topology(&m, &hole, &nan).is_err());
+        // an L-shaped hole whose reflex corner (3,3) sits between two loop vertices
+        // joined by a mesh edge (the diagonal of the remaining cell (2,3)): cutting
+        // the ear at (3,3) would add that edge a second time
+        let mut raw = RawMesh::default();
+        grid(6, 0.0, 0, &[(2, 2), (3, 2), (3, 3)], &mut raw);
+        let (m, _) = Mesh::from_raw(&raw);
+        let l = m
+            .topo
+            .boundary_loops()
+            .into_iter()
+            .find(|l| l.len() == 8)
+            .unwrap();
+        let k = l.len();
+        let i = l.iter().position(|&u| m.pos(u) == v(3., 3., 0.)).unwrap();
+        let at = |d: usize| ((i + d) % k) as u32;
+        let ear = || {
+            let mut t = vec![[at(k - 1), at(0), at(1)]];
+            for j in 2..k - 1 {
+                t.push([at(1), at(j), at(j + 1)]);
+            }
+            Patch {
+                new_vertices: vec![],
+                triangles: t,
+            }
+        };
+        let e = check_topology(&m, &l, &ear()).unwrap_err();
+        assert!(
+            e.to_string().contains("duplicates an existing mesh edge"),
+            "{e}"
+        );
+        // the ear at the convex corner (2,2) is fine
+        let j = l.iter().position(|&u| m.pos(u) == v(2., 2., 0.)).unwrap();
+        let at = |d: usize| ((j + d) % k) as u32;
+        let mut t = vec![[at(k - 1), at(0), at(1)]];
+        for d in 2..k - 1 {
+            t.push([at(1), at(d), at(d + 1)]);
+        }
+        check_topology(
+            &m,
+            &l,
+            &Patch {
+                new_vertices: vec![],
+                triangles: t,
+            },
+        )
+        .unwrap();
+    }
+
+    /// An n x n grid of unit cells at height z, vertex ids offset by `base`, minus
+    /// the cells in `removed` (i, j).
+    fn grid(n: usize, z: f64, base: u32, removed: &[(usize, usize)], raw: &mut RawMesh) {
+        for j in 0..=n {
+            for i in 0..=n {
+                raw.positions.push(v(i as f64, j as f64, z));
+            }
+        }
+        let id = |i: usize, j: usize| base + (j * (n + 1) + i) as u32;
+        for j in 0..n {
+            for i in 0..n {
+                if removed.contains(&(i, j)) {
+                    continue;
+                }
+                raw.faces.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+                raw.faces.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+    }
+
+    const HOLE: [(usize, usize); 4] = [(2, 2), (3, 2), (2, 3), (3, 3)];
+
+    /// The loop of 8 vertices around the 2x2 hole whose centre is (cx, cy, z).
+    fn hole_at(m: &Mesh, z: f64) -> Vec<VertexId> {
+        m.topo
+            .boundary_loops()
+            .into_iter()
+            .find(|l| l.len() == 8 && l.iter().all(|&u| m.pos(u).z == z))
+            .expect("hole loop")
+    }
+
+    fn fan(hole: &[VertexId], apex: DVec3) -> Patch {
+        let k = hole.len();
+        Patch {
+            new_vertices: vec![apex],
+            triangles: (0..k)
+                .map(|i| [i as u32, ((i + 1) % k) as u32, k as u32])
+                .collect(),
+        }
+    }
+
+    fn checks() -> Checks {
+        Checks {
+            self_intersection: true,
+            min_angle_deg: 0.5,
+        }
+    }
+
+    #[test]
+    fn flat_fan_on_a_grid_hole_is_accepted() {
+        let mut raw = RawMesh::default();
+        grid(6, 0.0, 0, &HOLE, &mut raw);
+        let (m, _) = Mesh::from_raw(&raw);
+        let hole = hole_at(&m, 0.0);
+        let chk = Checker::new(&m);
+        let q = chk
+            .check_patch(&m, &hole, &fan(&hole, v(3., 3., 0.)), &checks())
+            .unwrap();
+        assert!(q.min_angle_deg > 40.0);
+        // a raised apex is fine too, as long as nothing is in the way
+        chk.check_patch(&m, &hole, &fan(&hole, v(3., 3., 2.)), &checks())
+            .unwrap();
+        // an apex pushed sideways in the plane folds the fan over itself and the mesh
+        let e = chk
+            .check_patch(&m, &hole, &fan(&hole, v(4.5, 3., 0.)), &checks())
+            .unwrap_err();
+        assert!(matches!(e, CheckFailure::SelfIntersection(..)), "{e}");
+    }
+
+    #[test]
+    fn patch_poking_through_the_far_side_is_rejected() {
+        // a thin shell: the holed sheet at z = 0 and a full sheet 0.3 above it
+        let mut raw = RawMesh::default();
+        grid(6, 0.0, 0, &HOLE, &mut raw);
+        grid(6, 0.3, 49, &[], &mut raw);
+        let (m, _) = Mesh::from_raw(&raw);
+        let hole = hole_at(&m, 0.0);
+        let chk = Checker::new(&m);
+        chk.check_patch(&m, &hole, &fan(&hole, v(3., 3., 0.1)), &checks())
+            .unwrap();
+        let e = chk
+            .check_patch(&m, &hole, &fan(&hole, v(3., 3., 1.0)), &checks())
+            .unwrap_err();
+        let CheckFailure::SelfIntersection(_, what) = e else {
+            panic!("{e}")
+        };
+        let f: usize = what.strip_prefix("mesh face ").unwrap().parse().unwrap();
+        assert!(m
+            .tri(crate::mesh::FaceId::from_idx(f))
+            .iter()
+            .all(|p| p.z == 0.3));
+        // with the check off the same patch passes
+        let off = Checks {
+            self_intersection: false,
+            ..checks()
+        };
+        chk.check_patch(&m, &hole, &fan(&hole, v(3., 3., 1.0)), &off)
+            .unwrap();
+    }
+
+    #[test]
+    fn patch_folding_onto_itself_is_rejected() {
+        let mut raw = RawMesh::default();
+        grid(6, 0.0, 0, &HOLE, &mut raw);
+        let (m, _) = Mesh::from_raw(&raw);
+        let hole = hole_at(&m, 0.0);
+        let k = hole.len() as u32;
+        let chk = Checker::new(&m);
+        // two apexes; triangles 0..k/2 go to the first, the rest to the second
+        let tri = |a: DVec3, b: DVec3| {
+            let mut t: Vec<[u32; 3]> = Vec::new();
+            for i in 0..k {
+                let apex = if i < k / 2 { k } else { k + 1 };
+                t.push([i, (i + 1) % k, apex]);
+            }
+            t.push([k / 2, k + 1, k]);
+            t.push([0, k, k + 1]);
+            Patch {
+                new_vertices: vec![a, b],
+                triangles: t,
+            }
+        };
+        // the loop runs clockwise seen from +z: find which half each apex belongs to
+        let mid0 = (m.pos(hole[0]) + m.pos(hole[(k / 2) as usize])) * 0.5;
+        let half = |i: usize| m.pos(hole[i]) - mid0;
+        let side = (half(1) + half(2) + half(3)).normalize() * 0.5;
+        let good = tri(mid0 + side, mid0 - side);
+        chk.check_patch(&m, &hole, &good, &checks()).unwrap();
+        let bad = tri(mid0 - side, mid0 + side);
+        let e = chk.check_patch(&m, &hole, &bad, &checks()).unwrap_err();
+        assert!(
+            matches!(e, CheckFailure::SelfIntersection(_, ref s) if s.starts_with("patch triangle")),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn committed_faces_are_checked() {
+        // two holed sheets, the second 0.3 above; fill the upper hole, then a tall
+        // fan on the lower hole hits the new faces (before, it passed through)
+        let mut raw = RawMesh::default();
+        grid(6, 0.0, 0, &HOLE, &mut raw);
+        grid(6, 0.3, 49, &HOLE, &mut raw);
+        let (mut m, _) = Mesh::from_raw(&raw);
+        let lower = hole_at(&m, 0.0);
+        let upper = hole_at(&m, 0.3);
+        let mut chk = Checker::new(&m);
+        let tall = fan(&lower, v(3., 3., 1.0));
+        chk.check_patch(&m, &lower, &tall, &checks()).unwrap();
+        let lid = fan(&upper, v(3., 3., 0.3));
+        chk.check_patch(&m, &upper, &lid, &checks()).unwrap();
+        let hole = crate::fill::Hole::new(0, &m, upper.clone(), &crate::policy::Policy::default());
+        let faces = crate::fill::apply_patch(&mut m, &hole, &lid).unwrap();
+        // before the commit the faces are scanned as unseen, after it they are indexed
+        let e1 = chk.check_patch(&m, &lower, &tall, &checks()).unwrap_err();
+        chk.commit(&m, faces);
+        let e2 = chk.check_patch(&m, &lower, &tall, &checks()).unwrap_err();
+        assert_eq!(e1, e2);
+        let CheckFailure::SelfIntersection(_, what) = e2 else {
+            panic!()
+        };
+        let f: usize = what.strip_prefix("mesh face ").unwrap().parse().unwrap();
+        assert!(f >= m.num_faces() - 8);
+    }
+
+    #[test]
+    fn incremental_index_matches_a_fresh_one() {
+        // the checker of the lower sheet alone, then the upper sheet's faces
+        // committed in small batches (through the tail and several rebuilds)
+        let mut raw = RawMesh::default();
+        grid(6, 0.0, 0, &HOLE, &mut raw);
+        let nb = raw.faces.len();
+        grid(12, 0.3, 49, &[], &mut raw);
+        let (m, _) = Mesh::from_raw(&raw);
+        let lower_raw = RawMesh {
+            positions: raw.positions.clone(),
+            faces: raw.faces[..nb].to_vec(),
+            ..Default::default()
+        };
+        let (m0, _) = Mesh::from_raw(&lower_raw);
+        assert_eq!(m0.topo.faces(), &m.topo.faces()[..nb]);
+        let hole = hole_at(&m, 0.0);
+        let fresh = Checker::new(&m);
+        let mut inc = Checker::new(&m0);
+        let mut f = nb;
+        while f < m.num_faces() {
+            let e = (f + 7).min(m.num_faces());
+            inc.commit(&m, f..e);
+            f = e;
+        }
+        assert!(inc.extra_len > 0 && inc.extra_len < inc.committed.len());
+        for (apex, ok) in [
+            (v(3., 3., 0.1), true),
+            (v(3., 3., 1.), false),
+            (v(2.5, 3.5, 0.5), false),
+        ] {
+            let p = fan(&hole, apex);
+            let a = fresh.check_patch(&m, &hole, &p, &checks());
+            let b = inc.check_patch(&m, &hole, &p, &checks());
+            assert_eq!(a.is_ok(), ok);
+            assert_eq!(a.is_ok(), b.is_ok());
+        }
     }
 }

@@ -14,6 +14,7 @@
 //! ```
 #![forbid(unsafe_code)]
 
+pub mod bvh;
 pub mod check;
 pub mod fill;
 pub mod io;
@@ -103,7 +104,9 @@ fn remove_teeth(mut mesh: Mesh) -> (Mesh, usize) {
         let mut teeth: Vec<FaceId> = Vec::new();
         for f in 0..mesh.num_faces() {
             let f = FaceId::from_idx(f);
-            let open = (0..3).filter(|&c| mesh.topo.twin(f.halfedge(c)).is_none()).count();
+            let open = (0..3)
+                .filter(|&c| mesh.topo.twin(f.halfedge(c)).is_none())
+                .count();
             // a face with all three edges open is a whole component: keep it
             if open == 2 {
                 teeth.push(f);
@@ -153,7 +156,13 @@ fn fill_all(mesh: &mut Mesh, policy: &Policy, degenerate: &mut usize) -> Vec<Hol
         if hole.len() < 3 {
             *degenerate += 1;
         }
-        if let Some(rule) = border_rule(mesh, hole, policy, diag, longest.get(&loop_comp[i]) == Some(&i)) {
+        if let Some(rule) = border_rule(
+            mesh,
+            hole,
+            policy,
+            diag,
+            longest.get(&loop_comp[i]) == Some(&i),
+        ) {
             out.push(HoleReport {
                 id: hole.id,
                 boundary_vertices: hole.len(),
@@ -177,7 +186,13 @@ fn fill_all(mesh: &mut Mesh, policy: &Policy, degenerate: &mut usize) -> Vec<Hol
 }
 
 /// The outer-border rule: `Some(reason)` when the loop is skipped.
-fn border_rule(mesh: &Mesh, hole: &Hole, policy: &Policy, diag: f64, is_longest: bool) -> Option<String> {
+fn border_rule(
+    mesh: &Mesh,
+    hole: &Hole,
+    policy: &Policy,
+    diag: f64,
+    is_longest: bool,
+) -> Option<String> {
     let b = &policy.border;
     if b.only_longest && !is_longest {
         return None;
@@ -190,9 +205,17 @@ fn border_rule(mesh: &Mesh, hole: &Hole, policy: &Policy, diag: f64, is_longest:
         ));
     }
     if b.max_bbox_share > 0.0 && diag > 0.0 {
-        let pts: Vec<_> = hole.vertices.iter().map(|&v: &VertexId| mesh.pos(v)).collect();
-        let lo = pts.iter().fold(glam::DVec3::splat(f64::INFINITY), |a, p| a.min(*p));
-        let hi = pts.iter().fold(glam::DVec3::splat(f64::NEG_INFINITY), |a, p| a.max(*p));
+        let pts: Vec<_> = hole
+            .vertices
+            .iter()
+            .map(|&v: &VertexId| mesh.pos(v))
+            .collect();
+        let lo = pts
+            .iter()
+            .fold(glam::DVec3::splat(f64::INFINITY), |a, p| a.min(*p));
+        let hi = pts
+            .iter()
+            .fold(glam::DVec3::splat(f64::NEG_INFINITY), |a, p| a.max(*p));
         let share = (hi - lo).length() / diag;
         if share > b.max_bbox_share {
             return Some(format!(

@@ -31,7 +31,11 @@ pub mod exit {
 }
 
 #[derive(Parser)]
-#[command(name = "holefill", version, about = "Repairs scanned triangle meshes: closes every hole under a TOML policy")]
+#[command(
+    name = "holefill",
+    version,
+    about = "Repairs scanned triangle meshes: closes every hole under a TOML policy"
+)]
 struct Cli {
     #[command(subcommand)]
     cmd: Cmd,
@@ -122,12 +126,19 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
     let in_format = Format::from_path(&args.input).ok_or_else(|| {
         Failure(
             exit::DATAERR,
-            format!("{}: unsupported format (expected .obj, .ply, .stl or .off)", args.input.display()),
+            format!(
+                "{}: unsupported format (expected .obj, .ply, .stl or .off)",
+                args.input.display()
+            ),
         )
     })?;
     let out_format = match &args.format {
-        Some(name) => Format::from_name(name)
-            .ok_or_else(|| Failure(exit::USAGE, format!("--format {name}: expected obj, ply, stl or off")))?,
+        Some(name) => Format::from_name(name).ok_or_else(|| {
+            Failure(
+                exit::USAGE,
+                format!("--format {name}: expected obj, ply, stl or off"),
+            )
+        })?,
         None => in_format,
     };
 
@@ -179,7 +190,10 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
             s.holes, s.filled, s.skipped, s.failed, report.before.faces, report.after.faces
         );
     }
-    println!("FILL_TIME_S={:.6}", (report.timings.smooth_ms + report.timings.fill_ms) / 1000.0);
+    println!(
+        "FILL_TIME_S={:.6}",
+        (report.timings.smooth_ms + report.timings.fill_ms) / 1000.0
+    );
 
     let t = Instant::now();
     holefill::write(&args.output, &out, Some(out_format)).map_err(io_failure)?;

@@ -15,7 +15,9 @@ use super::{FillContext, FillError, Patch};
 pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
     let k = ctx.hole.len();
     if k < 3 {
-        return Err(FillError::Failed(format!("a loop of {k} vertices has no fan")));
+        return Err(FillError::Failed(format!(
+            "a loop of {k} vertices has no fan"
+        )));
     }
     if k == 3 {
         return Ok(Patch {

@@ -7,6 +7,7 @@
 //! Every hole ends filled, skipped (with the rule) or failed (with every attempt and why).
 
 pub mod advancing_front;
+pub mod fair;
 pub mod fan;
 pub mod geom;
 pub mod min_area_fair;
@@ -127,7 +128,11 @@ impl FillContext<'_> {
     }
     /// Positions of the loop.
     pub fn boundary_positions(&self) -> Vec<DVec3> {
-        self.hole.vertices.iter().map(|&v| self.mesh.pos(v)).collect()
+        self.hole
+            .vertices
+            .iter()
+            .map(|&v| self.mesh.pos(v))
+            .collect()
     }
 }
 
@@ -151,7 +156,12 @@ pub fn methods_for(policy: &Policy, class: HoleClass) -> &[Method] {
 
 /// Fills one hole with the class's method list, checking every patch and applying
 /// the first accepted one. Returns the hole's log entry.
-pub fn fill_hole(mesh: &mut Mesh, hole: &Hole, policy: &Policy, checker: &mut Checker) -> HoleReport {
+pub fn fill_hole(
+    mesh: &mut Mesh,
+    hole: &Hole,
+    policy: &Policy,
+    checker: &mut Checker,
+) -> HoleReport {
     let t0 = Instant::now();
     let mut rep = HoleReport {
         id: hole.id,
@@ -169,7 +179,10 @@ pub fn fill_hole(mesh: &mut Mesh, hole: &Hole, policy: &Policy, checker: &mut Ch
         ms: 0.0,
     };
     if hole.len() < 3 {
-        rep.reason = format!("a loop of {} boundary vertices cannot be filled", hole.len());
+        rep.reason = format!(
+            "a loop of {} boundary vertices cannot be filled",
+            hole.len()
+        );
         rep.ms = ms_since(t0);
         return rep;
     }
@@ -245,7 +258,11 @@ pub fn fill_hole(mesh: &mut Mesh, hole: &Hole, policy: &Policy, checker: &mut Ch
 
 /// Adds a checked patch to the mesh. Returns the range of new face indices.
 /// On failure the mesh is left as it was.
-pub fn apply_patch(mesh: &mut Mesh, hole: &Hole, patch: &Patch) -> Result<std::ops::Range<usize>, String> {
+pub fn apply_patch(
+    mesh: &mut Mesh,
+    hole: &Hole,
+    patch: &Patch,
+) -> Result<std::ops::Range<usize>, String> {
     let k = hole.len();
     let nv0 = mesh.num_vertices();
     let nf0 = mesh.num_faces();
@@ -254,7 +271,9 @@ pub fn apply_patch(mesh: &mut Mesh, hole: &Hole, patch: &Patch) -> Result<std::o
         bc
     });
     for &p in &patch.new_vertices {
-        let col = colors.as_ref().map(|bc| interpolate_color(mesh, hole, bc, p));
+        let col = colors
+            .as_ref()
+            .map(|bc| interpolate_color(mesh, hole, bc, p));
         mesh.add_vertex(p, col);
     }
     let map = |i: u32| -> Result<VertexId, String> {
@@ -297,7 +316,11 @@ fn interpolate_color(mesh: &Mesh, hole: &Hole, bc: &[[f32; 3]], p: DVec3) -> [f3
         wsum += w;
     }
     if wsum > 0.0 {
-        [(acc[0] / wsum) as f32, (acc[1] / wsum) as f32, (acc[2] / wsum) as f32]
+        [
+            (acc[0] / wsum) as f32,
+            (acc[1] / wsum) as f32,
+            (acc[2] / wsum) as f32,
+        ]
     } else {
         [0.5, 0.5, 0.5]
     }

@@ -4,10 +4,20 @@
 //! precision and encoding); writers take one back. The mesh builder
 //! ([`crate::mesh::Mesh::from_raw`]) turns the soup into a half-edge mesh.
 //!
-//! Bit-exactness: coordinates are held as `f64`. A file that stored `f32` reads into
-//! `f64` exactly and is written back as `f32` (exact); text formats are written with
-//! the shortest representation that round-trips, so every input vertex reads back
-//! identical.
+//! Bit-exactness: coordinates are held as `f64`. A file that stored `f32` (binary
+//! STL, PLY `float`, also ASCII PLY `float`, parsed straight to `f32`) reads into
+//! `f64` exactly, is marked [`Precision::F32`] and is written back as the same `f32`.
+//! Text is written with Rust's shortest representation that round-trips (of the
+//! `f64`, or of the `f32` when the precision is `F32`), so every input vertex reads
+//! back identical: bit-identical `f64` for `F64` meshes, the identical `f32` for
+//! `F32` meshes. Readers never reorder vertices (STL, which has no shared vertices,
+//! numbers its welded vertices in order of first appearance).
+//!
+//! Layout: one module per format (`obj`, `ply`, `stl`, `off`), shared line/token
+//! helpers in `text`, atomic output in `atomic`. Every reader streams through a
+//! buffered reader, checks header counts against the file size before reserving
+//! memory, and never panics on bad input; every error names the file (and the line
+//! for text formats where known).
 
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
@@ -118,26 +128,235 @@ impl IoError {
     }
 }
 
+mod atomic;
+mod obj;
+mod off;
+mod ply;
+mod stl;
+mod text;
+
+pub use atomic::write_atomic;
+
+use std::fs::File;
+use std::io::{BufReader, Write};
+
+/// Capacity of the buffered readers and writers (large: meshes of 10M faces).
+const BUF_CAPACITY: usize = 1 << 20;
+
 /// Reads a mesh file (format from `format`, else from the extension).
+///
+/// Every error names the file (and the line, for text formats, when known). The
+/// returned soup keeps the file's vertex order; polygons are fanned into triangles
+/// and what the reader resolved on the way is listed in [`RawMesh::notes`].
 pub fn read(path: &Path, format: Option<Format>) -> Result<RawMesh, IoError> {
-    let _ = format;
-    Err(IoError::UnknownFormat {
-        path: path.to_path_buf(),
-    })
+    let format = resolve_format(path, format)?;
+    let file = File::open(path).map_err(|e| io_error(path, e))?;
+    let len = file.metadata().map_err(|e| io_error(path, e))?.len();
+    if len == 0 {
+        return Err(malformed(path, None, "empty file"));
+    }
+    let reader = BufReader::with_capacity(BUF_CAPACITY, file);
+    let raw = match format {
+        Format::Obj => obj::read(path, reader)?,
+        Format::Ply => ply::read(path, reader, len)?,
+        Format::Stl => stl::read(path, reader, len)?,
+        Format::Off => off::read(path, reader, len)?,
+    };
+    check_read(path, &raw)?;
+    Ok(raw)
 }
 
 /// Writes a mesh file atomically (format from `format`, else from the extension).
+///
+/// The mesh is checked first (indices in range, finite coordinates, colours for every
+/// vertex); the file is then written to a temporary file in the same folder, synced
+/// and renamed over `path`, so `path` never holds a partial file.
+///
+/// Coordinates: binary formats store `f32` when `raw.precision` is
+/// [`Precision::F32`] (and binary STL always does), else `f64`; text formats write
+/// Rust's shortest round-trip representation of the `f64` (or of the `f32` when the
+/// precision is `F32`), so every value reads back identical.
 pub fn write(path: &Path, raw: &RawMesh, format: Option<Format>) -> Result<(), IoError> {
-    let _ = (raw, format);
-    Err(IoError::UnknownFormat {
-        path: path.to_path_buf(),
+    let format = resolve_format(path, format)?;
+    let binary_stl = format == Format::Stl && raw.encoding != Encoding::Ascii;
+    check_writable(path, raw, raw.precision == Precision::F32 || binary_stl)?;
+    atomic::write_with(path, |w| match format {
+        Format::Obj => obj::write(w, raw),
+        Format::Ply => ply::write(w, raw),
+        Format::Stl => stl::write(w, raw),
+        Format::Off => off::write(w, raw),
     })
 }
 
-/// Writes bytes atomically: a temporary file in the same folder, fsync, rename.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
-    std::fs::write(path, bytes).map_err(|source| IoError::Io {
+fn resolve_format(path: &Path, format: Option<Format>) -> Result<Format, IoError> {
+    format
+        .or_else(|| Format::from_path(path))
+        .ok_or_else(|| IoError::UnknownFormat {
+            path: path.to_path_buf(),
+        })
+}
+
+/// An operating-system error on `path`.
+pub(crate) fn io_error(path: &Path, source: std::io::Error) -> IoError {
+    IoError::Io {
         path: path.to_path_buf(),
         source,
-    })
+    }
 }
+
+/// A content error in `path` (at `line` when known).
+pub(crate) fn malformed(path: &Path, line: Option<usize>, message: impl Into<String>) -> IoError {
+    IoError::Malformed {
+        path: path.to_path_buf(),
+        line,
+        message: message.into(),
+    }
+}
+
+/// A read error: an unexpected end of file is a truncated (malformed) file, anything
+/// else an operating-system failure.
+pub(crate) fn read_error(path: &Path, e: std::io::Error, what: &str) -> IoError {
+    if e.kind() == std::io::ErrorKind::UnexpectedEof {
+        malformed(path, None, format!("truncated file: it ends inside {what}"))
+    } else {
+        io_error(path, e)
+    }
+}
+
+/// The largest number of vertices or faces a mesh may have (indices are `u32`).
+pub(crate) const MAX_ELEMENTS: u64 = u32::MAX as u64;
+
+/// Checks what every reader must deliver: at least one face, a colour per vertex
+/// when there are colours, indices in range.
+fn check_read(path: &Path, raw: &RawMesh) -> Result<(), IoError> {
+    if raw.positions.is_empty() {
+        return Err(malformed(path, None, "the file has no vertices"));
+    }
+    if raw.faces.is_empty() {
+        return Err(malformed(path, None, "the file has no faces"));
+    }
+    if let Some(c) = &raw.colors {
+        if c.len() != raw.positions.len() {
+            return Err(malformed(
+                path,
+                None,
+                format!("{} colours for {} vertices", c.len(), raw.positions.len()),
+            ));
+        }
+    }
+    let n = raw.positions.len();
+    if let Some(f) = raw
+        .faces
+        .iter()
+        .find(|f| f.iter().any(|&i| i as usize >= n))
+    {
+        return Err(malformed(
+            path,
+            None,
+            format!("face {f:?} has a vertex index out of range ({n} vertices)"),
+        ));
+    }
+    Ok(())
+}
+
+/// Checks a mesh before writing it, so that no half-written file is ever produced
+/// for a mesh that cannot be stored.
+fn check_writable(path: &Path, raw: &RawMesh, as_f32: bool) -> Result<(), IoError> {
+    let n = raw.positions.len();
+    let bad = |message: String| malformed(path, None, format!("cannot write mesh: {message}"));
+    if n as u64 > MAX_ELEMENTS || raw.faces.len() as u64 > MAX_ELEMENTS {
+        return Err(bad(format!(
+            "{n} vertices / {} faces exceed the limit of {MAX_ELEMENTS}",
+            raw.faces.len()
+        )));
+    }
+    if let Some(c) = &raw.colors {
+        if c.len() != n {
+            return Err(bad(format!("{} colours for {n} vertices", c.len())));
+        }
+        if let Some((i, _)) = c
+            .iter()
+            .enumerate()
+            .find(|(_, c)| c.iter().any(|v| !v.is_finite()))
+        {
+            return Err(bad(format!("vertex {i} has a non-finite colour")));
+        }
+    }
+    for (i, p) in raw.positions.iter().enumerate() {
+        if !p.is_finite() {
+            return Err(bad(format!("vertex {i} has a non-finite coordinate {p}")));
+        }
+        if as_f32 && !p.as_vec3().is_finite() {
+            return Err(bad(format!(
+                "vertex {i} coordinate {p} does not fit in a 32-bit float"
+            )));
+        }
+    }
+    if let Some((k, f)) = raw
+        .faces
+        .iter()
+        .enumerate()
+        .find(|(_, f)| f.iter().any(|&i| i as usize >= n))
+    {
+        return Err(bad(format!(
+            "face {k} {f:?} has a vertex index out of range ({n} vertices)"
+        )));
+    }
+    Ok(())
+}
+
+/// Writes a coordinate as text: Rust's shortest representation that parses back to
+/// the same value (of the `f32` when `f32` is set). Plain decimal notation for
+/// ordinary magnitudes, exponent notation for very large or small ones (both are
+/// shortest round-trip forms; plain notation of `1e300` would be 301 digits).
+pub(crate) fn write_real<W: Write>(w: &mut W, v: f64, f32: bool) -> std::io::Result<()> {
+    if f32 {
+        let v = v as f32;
+        let a = v.abs();
+        if a == 0.0 || (1e-5..1e16).contains(&a) {
+            write!(w, "{v}")
+        } else {
+            write!(w, "{v:e}")
+        }
+    } else {
+        let a = v.abs();
+        if a == 0.0 || (1e-5..1e16).contains(&a) {
+            write!(w, "{v}")
+        } else {
+            write!(w, "{v:e}")
+        }
+    }
+}
+
+/// A colour component in `[0, 1]` as a byte.
+pub(crate) fn color_byte(c: f32) -> u8 {
+    (c.clamp(0.0, 1.0) * 255.0).round() as u8
+}
+
+/// Fast hashing of bit patterns (STL welding); keys come from one file, so no
+/// protection against adversarial collisions is needed beyond the fallback of a
+/// hash map (a slow but correct weld).
+#[derive(Default, Clone, Copy)]
+pub(crate) struct FastHasher(u64);
+
+impl std::hash::Hasher for FastHasher {
+    fn finish(&self) -> u64 {
+        // Final avalanche (murmur3 fmix64) so that the low bits are well mixed.
+        let mut h = self.0;
+        h ^= h >> 33;
+        h = h.wrapping_mul(0xff51_afd7_ed55_8ccd);
+        h ^= h >> 33;
+        h = h.wrapping_mul(0xc4ce_b9fe_1a85_ec53);
+        h ^ (h >> 33)
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(u64::from(b));
+        }
+    }
+    fn write_u64(&mut self, i: u64) {
+        self.0 = (self.0.rotate_left(5) ^ i).wrapping_mul(0x517c_c1b7_2722_0a95);
+    }
+}
+
+pub(crate) type FastBuild = std::hash::BuildHasherDefault<FastHasher>;

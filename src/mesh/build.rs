@@ -35,10 +35,11 @@ pub struct BuildReport {
 impl BuildReport {
     /// True when the input needed no resolution at all.
     pub fn is_clean(&self) -> bool {
-        *self == BuildReport {
-            isolated_vertices: self.isolated_vertices,
-            ..Default::default()
-        }
+        *self
+            == BuildReport {
+                isolated_vertices: self.isolated_vertices,
+                ..Default::default()
+            }
     }
 }
 
@@ -152,7 +153,11 @@ impl Mesh {
                         continue;
                     }
                     let (a, b) = pairs[pi];
-                    let (mine, other) = if (a / 3) as usize == f { (a, b) } else { (b, a) };
+                    let (mine, other) = if (a / 3) as usize == f {
+                        (a, b)
+                    } else {
+                        (b, a)
+                    };
                     let g = (other / 3) as usize;
                     let same_dir = from(&faces, mine) == from(&faces, other);
                     // after flips the two must run in opposite directions
@@ -188,11 +193,12 @@ impl Mesh {
             }
         }
         drop(faces);
-        let find = |faces: &Vec<[VertexId; 3]>, f: usize, a: VertexId, b: VertexId| -> Option<u32> {
-            (0..3)
-                .find(|&c| faces[f][c] == a && faces[f][(c + 1) % 3] == b)
-                .map(|c| (f * 3 + c) as u32)
-        };
+        let find =
+            |faces: &Vec<[VertexId; 3]>, f: usize, a: VertexId, b: VertexId| -> Option<u32> {
+                (0..3)
+                    .find(|&c| faces[f][c] == a && faces[f][(c + 1) % 3] == b)
+                    .map(|c| (f * 3 + c) as u32)
+            };
         let mut twin: Vec<Option<HalfedgeId>> = vec![None; nf * 3];
         for (pi, &(a, b)) in pairs.iter().enumerate() {
             if cut[pi] {
@@ -223,7 +229,8 @@ impl Mesh {
         if let Some(c) = colors.as_mut() {
             c.resize(nv, [0.5, 0.5, 0.5]);
         }
-        let mut origin: Vec<Option<VertexId>> = (0..nv).map(|i| Some(VertexId::from_idx(i))).collect();
+        let mut origin: Vec<Option<VertexId>> =
+            (0..nv).map(|i| Some(VertexId::from_idx(i))).collect();
         let mut anchor: Vec<Option<HalfedgeId>> = vec![None; nv];
         let mut visited = vec![false; nf * 3];
         let mut topo = Topology {
@@ -365,7 +372,13 @@ mod tests {
     #[test]
     fn resolves_degenerate_duplicate_and_flipped_faces() {
         let raw = soup(
-            &[[0., 0., 0.], [1., 0., 0.], [1., 1., 0.], [0., 1., 0.], [2., 0., 0.]],
+            &[
+                [0., 0., 0.],
+                [1., 0., 0.],
+                [1., 1., 0.],
+                [0., 1., 0.],
+                [2., 0., 0.],
+            ],
             &[
                 [0, 1, 2],
                 [0, 2, 3],
@@ -389,13 +402,22 @@ mod tests {
     fn flips_an_inconsistent_face() {
         // faces 0 and 1 share edge 0-2 wound the same way; face 2 agrees with face 0
         let raw = soup(
-            &[[0., 0., 0.], [1., 0., 0.], [1., 1., 0.], [0., 1., 0.], [0.5, -1., 0.]],
+            &[
+                [0., 0., 0.],
+                [1., 0., 0.],
+                [1., 1., 0.],
+                [0., 1., 0.],
+                [0.5, -1., 0.],
+            ],
             &[[0, 1, 2], [0, 3, 2], [1, 0, 4]],
         );
         let (m, rep) = Mesh::from_raw(&raw);
         m.validate().unwrap();
         assert_eq!(rep.flipped_faces, 1);
-        assert_eq!(m.topo.face(crate::mesh::FaceId(1)), [VertexId(0), VertexId(2), VertexId(3)]);
+        assert_eq!(
+            m.topo.face(crate::mesh::FaceId(1)),
+            [VertexId(0), VertexId(2), VertexId(3)]
+        );
         assert_eq!(m.topo.boundary_loops().len(), 1);
     }
 
@@ -403,7 +425,13 @@ mod tests {
     fn splits_bowtie_vertex_and_non_manifold_edge() {
         // two triangles touching at vertex 0 only
         let raw = soup(
-            &[[0., 0., 0.], [1., 0., 0.], [1., 1., 0.], [-1., 0., 0.], [-1., -1., 0.]],
+            &[
+                [0., 0., 0.],
+                [1., 0., 0.],
+                [1., 1., 0.],
+                [-1., 0., 0.],
+                [-1., -1., 0.],
+            ],
             &[[0, 1, 2], [0, 3, 4]],
         );
         let (m, rep) = Mesh::from_raw(&raw);
@@ -415,7 +443,13 @@ mod tests {
 
         // three triangles on edge 0-1
         let raw = soup(
-            &[[0., 0., 0.], [1., 0., 0.], [0.5, 1., 0.], [0.5, -1., 0.], [0.5, 0., 1.]],
+            &[
+                [0., 0., 0.],
+                [1., 0., 0.],
+                [0.5, 1., 0.],
+                [0.5, -1., 0.],
+                [0.5, 0., 1.],
+            ],
             &[[0, 1, 2], [1, 0, 3], [0, 1, 4]],
         );
         let (m, rep) = Mesh::from_raw(&raw);

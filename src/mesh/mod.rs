@@ -204,7 +204,10 @@ impl Topology {
             for c in 0..3 {
                 let key = (f[c], f[(c + 1) % 3]);
                 if existing.contains_key(&key) || open.contains_key(&key) {
-                    return Err(format!("directed edge {}->{} would be used twice", key.0, key.1));
+                    return Err(format!(
+                        "directed edge {}->{} would be used twice",
+                        key.0, key.1
+                    ));
                 }
                 open.insert(key, HalfedgeId((base + fi as u32) * 3 + c as u32));
             }
@@ -279,7 +282,11 @@ impl Topology {
                 }
                 corners[f[c].idx()] += 1;
                 if !directed.insert((f[c], f[(c + 1) % 3])) {
-                    return Err(format!("directed edge {}->{} used twice", f[c], f[(c + 1) % 3]));
+                    return Err(format!(
+                        "directed edge {}->{} used twice",
+                        f[c],
+                        f[(c + 1) % 3]
+                    ));
                 }
             }
         }

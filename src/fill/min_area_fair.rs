@@ -1,7 +1,0 @@
-//! (being written)
-use super::{FillContext, FillError, Patch};
-
-/// Fills the hole.
-pub fn fill(_ctx: &FillContext) -> Result<Patch, FillError> {
-    Err(FillError::Failed("min_area_fair is not available yet".into()))
-}

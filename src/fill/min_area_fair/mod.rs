@@ -1,0 +1,155 @@
+//! Middle-sized holes: minimum-area triangulation, refinement, fairing.
+//!
+//! Paper 002 (Feng et al. 2020), §5.2, Algorithm 2; ALGORITHMS B2. Three stages:
+//! 1. [`triangulate`]: the loop is triangulated by dynamic programming, weight total
+//!    area (the paper) or Liepa's max-dihedral-then-area (`refine.weight`). Large loops
+//!    restrict the search (see that module for how we read CGAL's restriction).
+//! 2. [`refine`]: triangles are split at their centroids until they match the density
+//!    of the surrounding mesh (`refine.density`, paper: sqrt 2), with Delaunay edge
+//!    swaps after each round.
+//! 3. [`crate::fill::fair`]: the new vertices solve `Δ^c x = 0` (`fair.continuity`,
+//!    `fair.weights`) with the loop and enough outer rings of the mesh fixed.
+//!
+//! Reading of the vague passages: the paper's step 13-15 ("search the two adjacent faces
+//! of the boundary, combine them with the refined patch and deform the new patch by
+//! Laplace-Beltrami") is read as Liepa's and CGAL's fairing: only the new vertices move,
+//! the adjacent faces enter the operator as constraints, because moving input vertices
+//! is not allowed here (input vertices are written back bit-exact). The paper's split
+//! pass runs once over the initial triangles, but its text says splitting continues
+//! "until no new triangles created", which we follow (as Liepa and CGAL do).
+
+pub mod refine;
+pub mod triangulate;
+
+use super::{fair, FillContext, FillError, Patch};
+use crate::mesh::{Mesh, VertexId};
+use glam::DVec3;
+use std::collections::{HashMap, HashSet};
+
+/// Loop chords `(a, b)`, `a < b`, that are existing mesh edges (loop edges excluded).
+pub fn forbidden_chords(mesh: &Mesh, lp: &[VertexId]) -> HashSet<(u32, u32)> {
+    let k = lp.len();
+    let index: HashMap<VertexId, u32> =
+        lp.iter().enumerate().map(|(i, &v)| (v, i as u32)).collect();
+    let mut out = HashSet::new();
+    for (i, &v) in lp.iter().enumerate() {
+        for w in mesh.topo.neighbors(v) {
+            if let Some(&j) = index.get(&w) {
+                let i = i as u32;
+                let adjacent =
+                    (i as usize + 1) % k == j as usize || (j as usize + 1) % k == i as usize;
+                if !adjacent && i != j {
+                    out.insert((i.min(j), i.max(j)));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Unit normal of the mesh face outside each loop edge `v[i] -> v[i+1]` (the face
+/// holding the half-edge `v[i+1] -> v[i]`).
+pub fn outside_normals(mesh: &Mesh, lp: &[VertexId]) -> Vec<Option<DVec3>> {
+    let k = lp.len();
+    (0..k)
+        .map(|i| {
+            let (a, b) = (lp[i], lp[(i + 1) % k]);
+            mesh.topo
+                .outgoing(b)
+                .find(|&h| mesh.topo.to(h) == a)
+                .map(|h| mesh.face_normal_raw(h.face()).normalize_or_zero())
+                .filter(|n| *n != DVec3::ZERO)
+        })
+        .collect()
+}
+
+/// Scale of each loop vertex: mean length of its mesh edges that are not hole-boundary
+/// edges (the loop's mean edge length when it has none).
+pub fn loop_scales(mesh: &Mesh, lp: &[VertexId], fallback: f64) -> Vec<f64> {
+    let k = lp.len();
+    (0..k)
+        .map(|i| {
+            let v = lp[i];
+            let prev = lp[(i + k - 1) % k];
+            let next = lp[(i + 1) % k];
+            let p = mesh.pos(v);
+            let (mut sum, mut n) = (0.0, 0usize);
+            for w in mesh.topo.neighbors(v) {
+                if w == prev || w == next {
+                    continue;
+                }
+                sum += (mesh.pos(w) - p).length();
+                n += 1;
+            }
+            if n > 0 && sum > 0.0 {
+                sum / n as f64
+            } else {
+                fallback
+            }
+        })
+        .collect()
+}
+
+/// Relaxation rounds on the refined (flat) patch before fairing.
+const RELAX_FLAT: usize = 10;
+/// Relaxation rounds on the faired patch before the second fairing.
+const RELAX_FAIRED: usize = 4;
+
+/// Fills the hole: triangulate, refine, relax, fair.
+pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
+    let k = ctx.hole.len();
+    if k < 3 {
+        return Err(FillError::Failed(format!(
+            "a loop of {k} vertices cannot be filled"
+        )));
+    }
+    let pts = ctx.boundary_positions();
+    if pts.iter().any(|p| !p.is_finite()) {
+        return Err(FillError::Failed(
+            "the loop has a non-finite coordinate".into(),
+        ));
+    }
+    let forbidden = forbidden_chords(ctx.mesh, &ctx.hole.vertices);
+    let outside = outside_normals(ctx.mesh, &ctx.hole.vertices);
+    let input = triangulate::LoopInput {
+        pts: &pts,
+        forbidden: &forbidden,
+        outside_normals: &outside,
+        weight: ctx.policy.refine.weight,
+        min_angle: ctx.policy.checks.min_angle_deg.max(0.0).to_radians(),
+        restricted_above: ctx.policy.refine.restricted_search_above,
+        deadline: ctx.deadline,
+    };
+    let tris = triangulate::triangulate(&input)?;
+    let scale = loop_scales(ctx.mesh, &ctx.hole.vertices, ctx.hole.mean_edge_length);
+    let mut r = refine::Refiner::new(pts, scale, tris, &forbidden);
+    r.refine(ctx.policy.refine.density, &ctx.deadline)?;
+    let refined = r.pos.len() > k;
+    if refined {
+        let extra = if ctx.policy.fair.continuity == 0 {
+            RELAX_FAIRED
+        } else {
+            0
+        };
+        r.relax(RELAX_FLAT + extra, &ctx.deadline)?;
+    }
+    let mut patch = Patch {
+        new_vertices: r.pos[k..].to_vec(),
+        triangles: r.tris.clone(),
+    };
+    ctx.deadline.check()?;
+    fair::fair_patch(ctx.mesh, ctx.hole, &mut patch, &ctx.policy.fair)?;
+    if refined && ctx.policy.fair.continuity > 0 && RELAX_FAIRED > 0 {
+        // second pass on the faired surface: even out, swap, fair again
+        r.pos.truncate(k);
+        r.pos.extend_from_slice(&patch.new_vertices);
+        r.relax(RELAX_FAIRED, &ctx.deadline)?;
+        patch.new_vertices = r.pos[k..].to_vec();
+        patch.triangles = r.tris.clone();
+        fair::fair_patch(ctx.mesh, ctx.hole, &mut patch, &ctx.policy.fair)?;
+    }
+    Ok(patch)
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,417 @@
+//! Refinement of the initial triangulation to the density of the surrounding mesh:
+//! paper 002 §5.2 "patch refinement" (after Liepa 2003), ALGORITHMS B2 step 2.
+//!
+//! Each loop vertex carries a scale `s(v)`, the mean length of its mesh edges that are
+//! not hole-boundary edges (the mean boundary edge length when it has none). A patch
+//! triangle `(i, j, m)` with centroid `c` and `s(c) = (s_i + s_j + s_m)/3` is split at
+//! `c` into three when for every corner `t`: `ρ·|c - v_t| > s(c)` and
+//! `ρ·|c - v_t| > s(v_t)`, with `ρ = refine.density` (paper: sqrt 2). The new vertex
+//! gets `s(c)`. After each round of splits every interior patch edge that is not
+//! locally Delaunay is swapped (Lawson's flips): the edge `a-b` between triangles
+//! `(a, b, c)` and `(b, a, d)` is swapped for `c-d` when the angles at `c` and `d` sum
+//! to more than π, the 3D form of "the opposite vertex lies inside the circumcircle".
+//! Rounds repeat until no triangle splits.
+//!
+//! Reading of the vague parts: the paper's "until no new triangles created" is taken
+//! literally (rounds repeat), as in Liepa and CGAL. A swap is refused when the new edge
+//! already exists (in the patch, or in the mesh between two loop vertices, or as a loop
+//! edge), when a new triangle would be degenerate, or when it would fold against the
+//! pair it replaces; a flip budget bounds the swapping on non-planar patches, where 3D
+//! Delaunay flips need not terminate.
+
+use super::super::{Deadline, FillError};
+use glam::DVec3;
+use std::collections::{HashMap, HashSet};
+
+/// The patch during refinement.
+pub struct Refiner<'a> {
+    /// Loop vertices first (k of them), then new vertices.
+    pub pos: Vec<DVec3>,
+    /// Target edge length per vertex.
+    pub scale: Vec<f64>,
+    /// Triangles over `pos`.
+    pub tris: Vec<[u32; 3]>,
+    /// Directed edge -> triangle.
+    edges: HashMap<(u32, u32), u32>,
+    k: usize,
+    forbidden: &'a HashSet<(u32, u32)>,
+    /// Relaxation uses valence flips (else Delaunay swaps).
+    pub valence: bool,
+}
+
+/// Hard cap on the refined patch size (a guard against absurd scales).
+pub const MAX_TRIANGLES: usize = 4_000_000;
+
+impl<'a> Refiner<'a> {
+    /// A refiner over loop positions `pos` (k = pos.len()), their scales and an initial
+    /// triangulation; `forbidden` holds the loop chords that are existing mesh edges.
+    pub fn new(
+        pos: Vec<DVec3>,
+        scale: Vec<f64>,
+        tris: Vec<[u32; 3]>,
+        forbidden: &'a HashSet<(u32, u32)>,
+    ) -> Refiner<'a> {
+        let k = pos.len();
+        let mut edges = HashMap::with_capacity(tris.len() * 3);
+        for (t, tri) in tris.iter().enumerate() {
+            for c in 0..3 {
+                edges.insert((tri[c], tri[(c + 1) % 3]), t as u32);
+            }
+        }
+        Refiner {
+            pos,
+            scale,
+            tris,
+            edges,
+            k,
+            forbidden,
+            valence: true,
+        }
+    }
+
+    /// Runs split rounds and swaps until no triangle splits.
+    pub fn refine(&mut self, density: f64, deadline: &Deadline) -> Result<(), FillError> {
+        if !density.is_finite() || density <= 0.0 {
+            return Ok(());
+        }
+        let mut rounds = 0usize;
+        loop {
+            deadline.check()?;
+            let split = self.split_round(density, deadline)?;
+            if split == 0 {
+                break;
+            }
+            self.delaunay_swaps(deadline)?;
+            rounds += 1;
+            if rounds > 200 {
+                break;
+            }
+        }
+        Ok(())
+    }
+
+    fn split_round(&mut self, density: f64, deadline: &Deadline) -> Result<usize, FillError> {
+        let n = self.tris.len();
+        let mut count = 0;
+        for t in 0..n {
+            if t % 4096 == 0 {
+                deadline.check()?;
+            }
+            let [a, b, c] = self.tris[t];
+            let [pa, pb, pc] = [a, b, c].map(|i| self.pos[i as usize]);
+            let cen = (pa + pb + pc) / 3.0;
+            let sc =
+                (self.scale[a as usize] + self.scale[b as usize] + self.scale[c as usize]) / 3.0;
+            let ok = [a, b, c].iter().all(|&v| {
+                let d = density * (cen - self.pos[v as usize]).length();
+                d > sc && d > self.scale[v as usize]
+            });
+            if !ok {
+                continue;
+            }
+            if self.tris.len() + 2 > MAX_TRIANGLES {
+                return Err(FillError::Failed(format!(
+                    "refinement would exceed {MAX_TRIANGLES} triangles"
+                )));
+            }
+            let nv = self.pos.len() as u32;
+            self.pos.push(cen);
+            self.scale.push(sc);
+            let t1 = self.tris.len() as u32;
+            let t2 = t1 + 1;
+            self.tris[t] = [a, b, nv];
+            self.tris.push([b, c, nv]);
+            self.tris.push([c, a, nv]);
+            let t = t as u32;
+            self.edges.insert((b, nv), t);
+            self.edges.insert((nv, a), t);
+            self.edges.insert((b, c), t1);
+            self.edges.insert((c, nv), t1);
+            self.edges.insert((nv, b), t1);
+            self.edges.insert((c, a), t2);
+            self.edges.insert((a, nv), t2);
+            self.edges.insert((nv, c), t2);
+            count += 1;
+        }
+        Ok(count)
+    }
+
+    fn third(tri: [u32; 3], a: u32, b: u32) -> u32 {
+        tri.into_iter().find(|&v| v != a && v != b).unwrap_or(a)
+    }
+
+    /// May `c`-`d` become an edge?
+    fn edge_allowed(&self, c: u32, d: u32) -> bool {
+        if c == d || self.edges.contains_key(&(c, d)) || self.edges.contains_key(&(d, c)) {
+            return false;
+        }
+        let k = self.k as u32;
+        if c < k && d < k {
+            if (c + 1) % k == d || (d + 1) % k == c {
+                return false;
+            }
+            if self.forbidden.contains(&(c.min(d), c.max(d))) {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// The flip of edge a-b (triangles `(a, b, c)`, `(b, a, d)`) to c-d, when it is
+    /// admissible: the new edge is allowed, neither new triangle is degenerate or
+    /// folds against the pair it replaces. Returns `(t1, t2, c, d)`.
+    fn flip_candidate(&self, a: u32, b: u32) -> Option<(u32, u32, u32, u32)> {
+        let (Some(&t1), Some(&t2)) = (self.edges.get(&(a, b)), self.edges.get(&(b, a))) else {
+            return None;
+        };
+        let c = Self::third(self.tris[t1 as usize], a, b);
+        let d = Self::third(self.tris[t2 as usize], a, b);
+        if !self.edge_allowed(c, d) {
+            return None;
+        }
+        let [pa, pb, pc, pd] = [a, b, c, d].map(|i| self.pos[i as usize]);
+        let n_old = (pb - pa).cross(pc - pa) + (pa - pb).cross(pd - pb);
+        let n1 = (pa - pc).cross(pd - pc);
+        let n2 = (pb - pd).cross(pc - pd);
+        let l2 = (pc - pd).length_squared().max((pa - pb).length_squared());
+        if !(n1.dot(n_old) > 0.0 && n2.dot(n_old) > 0.0)
+            || n1.length() <= 1e-12 * l2
+            || n2.length() <= 1e-12 * l2
+        {
+            return None;
+        }
+        Some((t1, t2, c, d))
+    }
+
+    /// The smallest angle after flipping a-b to c-d is at least the smaller of the
+    /// smallest angle before and 15 degrees (a valence flip must not make slivers).
+    fn flip_keeps_angles(&self, a: u32, b: u32, c: u32, d: u32) -> bool {
+        let [pa, pb, pc, pd] = [a, b, c, d].map(|i| self.pos[i as usize]);
+        let min3 = |x: DVec3, y: DVec3, z: DVec3| {
+            let g = super::super::geom::angles(x, y, z);
+            g[0].min(g[1]).min(g[2])
+        };
+        let before = min3(pa, pb, pc).min(min3(pb, pa, pd));
+        let after = min3(pc, pa, pd).min(min3(pd, pb, pc));
+        after >= before.min(15f64.to_radians())
+    }
+
+    fn do_flip(&mut self, a: u32, b: u32, (t1, t2, c, d): (u32, u32, u32, u32)) {
+        self.tris[t1 as usize] = [c, a, d];
+        self.tris[t2 as usize] = [d, b, c];
+        self.edges.remove(&(a, b));
+        self.edges.remove(&(b, a));
+        self.edges.insert((c, a), t1);
+        self.edges.insert((a, d), t1);
+        self.edges.insert((d, c), t1);
+        self.edges.insert((d, b), t2);
+        self.edges.insert((b, c), t2);
+        self.edges.insert((c, d), t2);
+    }
+
+    /// Swaps the edge a-b when it is not locally Delaunay and the swap is admissible.
+    /// Returns the new edge `(c, d)`.
+    fn try_swap(&mut self, a: u32, b: u32) -> Option<(u32, u32)> {
+        let (Some(&t1), Some(&t2)) = (self.edges.get(&(a, b)), self.edges.get(&(b, a))) else {
+            return None;
+        };
+        let c = Self::third(self.tris[t1 as usize], a, b);
+        let d = Self::third(self.tris[t2 as usize], a, b);
+        let [pa, pb, pc, pd] = [a, b, c, d].map(|i| self.pos[i as usize]);
+        let alpha = super::super::geom::angle_at(pc, pa, pb);
+        let beta = super::super::geom::angle_at(pd, pa, pb);
+        if alpha + beta <= std::f64::consts::PI + 1e-10 {
+            return None;
+        }
+        let f = self.flip_candidate(a, b)?;
+        self.do_flip(a, b, f);
+        Some((c, d))
+    }
+
+    /// Flips that bring vertex valences toward their ideal: 6 for a new vertex, and for
+    /// a loop vertex one more than its patch angle in multiples of 60 degrees (the
+    /// number of near-equilateral triangles that fit). Returns the number of flips.
+    pub fn valence_flips(&mut self, deadline: &Deadline) -> Result<usize, FillError> {
+        let n = self.pos.len();
+        let k = self.k;
+        let mut angle = vec![0.0f64; k];
+        for t in &self.tris {
+            for c in 0..3 {
+                let v = t[c] as usize;
+                if v < k {
+                    let [p, q, r] =
+                        [t[c], t[(c + 1) % 3], t[(c + 2) % 3]].map(|i| self.pos[i as usize]);
+                    angle[v] += super::super::geom::angle_at(p, q, r);
+                }
+            }
+        }
+        let target: Vec<i64> = (0..n)
+            .map(|v| {
+                if v < k {
+                    ((angle[v] / (std::f64::consts::PI / 3.0)).round() as i64 + 1).max(2)
+                } else {
+                    6
+                }
+            })
+            .collect();
+        let mut val = vec![0i64; n];
+        let mut keys: Vec<(u32, u32)> = self.edges.keys().copied().collect();
+        keys.sort_unstable();
+        for &(a, b) in &keys {
+            if a < b || !self.edges.contains_key(&(b, a)) {
+                val[a as usize] += 1;
+                val[b as usize] += 1;
+            }
+        }
+        let mut flips = 0;
+        for _pass in 0..4 {
+            deadline.check()?;
+            let mut keys: Vec<(u32, u32)> =
+                self.edges.keys().copied().filter(|&(a, b)| a < b).collect();
+            keys.sort_unstable();
+            let mut changed = 0;
+            for (a, b) in keys {
+                let Some(f) = self.flip_candidate(a, b) else {
+                    continue;
+                };
+                let (c, d) = (f.2, f.3);
+                let dev = |v: u32, dv: i64| {
+                    let x = val[v as usize] + dv - target[v as usize];
+                    x * x
+                };
+                let before = dev(a, 0) + dev(b, 0) + dev(c, 0) + dev(d, 0);
+                let after = dev(a, -1) + dev(b, -1) + dev(c, 1) + dev(d, 1);
+                if after < before && self.flip_keeps_angles(a, b, c, d) {
+                    self.do_flip(a, b, f);
+                    val[a as usize] -= 1;
+                    val[b as usize] -= 1;
+                    val[c as usize] += 1;
+                    val[d as usize] += 1;
+                    changed += 1;
+                }
+            }
+            flips += changed;
+            if changed == 0 {
+                break;
+            }
+        }
+        Ok(flips)
+    }
+
+    /// Lawson flips until every interior edge is locally Delaunay (or the budget runs out).
+    pub fn delaunay_swaps(&mut self, deadline: &Deadline) -> Result<usize, FillError> {
+        let mut stack: Vec<(u32, u32)> =
+            self.edges.keys().copied().filter(|&(a, b)| a < b).collect();
+        stack.sort_unstable();
+        let budget = 20 * self.tris.len() + 1000;
+        let mut flips = 0usize;
+        let mut steps = 0usize;
+        while let Some((a, b)) = stack.pop() {
+            steps += 1;
+            if steps % 8192 == 0 {
+                deadline.check()?;
+            }
+            if let Some((c, d)) = self.try_swap(a, b) {
+                flips += 1;
+                if flips > budget {
+                    break;
+                }
+                // the four outer edges of the new pair
+                for (x, y) in [(c, a), (a, d), (d, b), (b, c)] {
+                    stack.push((x.min(y), x.max(y)));
+                }
+            }
+        }
+        Ok(flips)
+    }
+
+    /// Tangential relaxation of the new vertices, each moved toward the mean of its
+    /// neighbours within its tangent plane (uniform Laplacian with the normal part
+    /// removed), followed by Delaunay swaps; `iterations` rounds. A move that would
+    /// flip or flatten an incident triangle is not made. The loop vertices stay fixed.
+    pub fn relax(&mut self, iterations: usize, deadline: &Deadline) -> Result<(), FillError> {
+        let k = self.k;
+        for _ in 0..iterations {
+            deadline.check()?;
+            let n = self.pos.len();
+            if n == k {
+                return Ok(());
+            }
+            let mut ring: Vec<Vec<u32>> = vec![Vec::new(); n - k];
+            let mut fan: Vec<Vec<u32>> = vec![Vec::new(); n - k];
+            if self.valence {
+                self.valence_flips(deadline)?;
+            }
+            for (t, tri) in self.tris.iter().enumerate() {
+                for (c, &v) in tri.iter().enumerate() {
+                    if v as usize >= k {
+                        fan[v as usize - k].push(t as u32);
+                        ring[v as usize - k].push(tri[(c + 1) % 3]);
+                    }
+                }
+            }
+            for v in k..n {
+                let nb = &ring[v - k];
+                if nb.is_empty() {
+                    continue;
+                }
+                let p = self.pos[v];
+                let mut normal = DVec3::ZERO;
+                for &t in &fan[v - k] {
+                    let [a, b, c] = self.tris[t as usize].map(|i| self.pos[i as usize]);
+                    normal += (b - a).cross(c - a);
+                }
+                let normal = normal.normalize_or_zero();
+                // mean of the apexes that would make each incident triangle equilateral
+                let (mut target, mut wsum) = (DVec3::ZERO, 0.0);
+                for &t in &fan[v - k] {
+                    let tri = self.tris[t as usize];
+                    let Some(c) = tri.iter().position(|&i| i as usize == v) else {
+                        continue;
+                    };
+                    let a = self.pos[tri[(c + 1) % 3] as usize];
+                    let b = self.pos[tri[(c + 2) % 3] as usize];
+                    let e = b - a;
+                    let len = e.length();
+                    let left = normal.cross(e).normalize_or_zero();
+                    target += ((a + b) / 2.0 + left * (0.75f64.sqrt() * len)) * len;
+                    wsum += len;
+                }
+                let mean = if wsum > 0.0 {
+                    target / wsum
+                } else {
+                    nb.iter().map(|&w| self.pos[w as usize]).sum::<DVec3>() / nb.len() as f64
+                };
+                let d = mean - p;
+                let d = d - normal * normal.dot(d);
+                let q = p + d;
+                // keep every incident triangle oriented and non-degenerate
+                let ok = fan[v - k].iter().all(|&t| {
+                    let tri = self.tris[t as usize];
+                    let before = tri.map(|i| self.pos[i as usize]);
+                    let after = tri.map(|i| {
+                        if i as usize == v {
+                            q
+                        } else {
+                            self.pos[i as usize]
+                        }
+                    });
+                    let nb_ = (before[1] - before[0]).cross(before[2] - before[0]);
+                    let na = (after[1] - after[0]).cross(after[2] - after[0]);
+                    let l2 = (after[1] - after[0])
+                        .length_squared()
+                        .max((after[2] - after[1]).length_squared())
+                        .max((after[0] - after[2]).length_squared());
+                    na.dot(nb_) > 0.0 && na.length() > 1e-6 * l2
+                });
+                if ok && q.is_finite() {
+                    self.pos[v] = q;
+                }
+            }
+            if !self.valence {
+                self.delaunay_swaps(deadline)?;
+            }
+        }
+        Ok(())
+    }
+}

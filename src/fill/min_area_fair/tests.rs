@@ -1,0 +1,483 @@
+//! Oracle tests: plane, sphere and cylinder holes, big loops, random polygons.
+
+use super::*;
+use crate::check::{check_degenerate, check_topology, patch_positions, quality};
+use crate::fill::{apply_patch, Deadline, Hole};
+use crate::io::RawMesh;
+use crate::policy::{Policy, TriangulationWeight, Weights};
+use proptest::prelude::*;
+
+/// Icosphere of radius `r` with `level` subdivisions.
+pub(crate) fn icosphere(level: usize, r: f64) -> RawMesh {
+    let t = (1.0 + 5f64.sqrt()) / 2.0;
+    let mut pos: Vec<DVec3> = [
+        (-1.0, t, 0.0),
+        (1.0, t, 0.0),
+        (-1.0, -t, 0.0),
+        (1.0, -t, 0.0),
+        (0.0, -1.0, t),
+        (0.0, 1.0, t),
+        (0.0, -1.0, -t),
+        (0.0, 1.0, -t),
+        (t, 0.0, -1.0),
+        (t, 0.0, 1.0),
+        (-t, 0.0, -1.0),
+        (-t, 0.0, 1.0),
+    ]
+    .iter()
+    .map(|&(x, y, z)| DVec3::new(x, y, z).normalize())
+    .collect();
+    let mut faces: Vec<[u32; 3]> = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    for _ in 0..level {
+        let mut mid: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut next = Vec::with_capacity(faces.len() * 4);
+        let mut m = |a: u32, b: u32, pos: &mut Vec<DVec3>| -> u32 {
+            *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                pos.push(((pos[a as usize] + pos[b as usize]) / 2.0).normalize());
+                (pos.len() - 1) as u32
+            })
+        };
+        for f in &faces {
+            let ab = m(f[0], f[1], &mut pos);
+            let bc = m(f[1], f[2], &mut pos);
+            let ca = m(f[2], f[0], &mut pos);
+            next.push([f[0], ab, ca]);
+            next.push([f[1], bc, ab]);
+            next.push([f[2], ca, bc]);
+            next.push([ab, bc, ca]);
+        }
+        faces = next;
+    }
+    RawMesh {
+        positions: pos.into_iter().map(|p| p * r).collect(),
+        faces,
+        ..RawMesh::default()
+    }
+}
+
+/// Removes the faces whose centroid satisfies `cut`.
+fn cut(raw: &RawMesh, cut: impl Fn(DVec3) -> bool) -> RawMesh {
+    let mut out = raw.clone();
+    out.faces.retain(|f| {
+        let c = (raw.positions[f[0] as usize]
+            + raw.positions[f[1] as usize]
+            + raw.positions[f[2] as usize])
+            / 3.0;
+        !cut(c)
+    });
+    out
+}
+
+/// The mesh and the hole whose loop satisfies `pick` (the only such loop).
+fn mesh_and_hole(raw: &RawMesh, pick: impl Fn(&Mesh, &[VertexId]) -> bool) -> (Mesh, Hole, Policy) {
+    let (mesh, _) = Mesh::from_raw(raw);
+    mesh.validate().unwrap();
+    let policy = Policy::default();
+    let loops: Vec<Vec<VertexId>> = mesh
+        .topo
+        .boundary_loops()
+        .into_iter()
+        .filter(|l| pick(&mesh, l))
+        .collect();
+    assert_eq!(loops.len(), 1, "expected one hole loop");
+    let hole = Hole::new(0, &mesh, loops[0].clone(), &policy);
+    (mesh, hole, policy)
+}
+
+/// Fills, checks topology and degeneracy, applies, validates. Returns the patch.
+fn fill_checked(mesh: &mut Mesh, hole: &Hole, policy: &Policy) -> Patch {
+    let ctx = FillContext {
+        mesh,
+        hole,
+        policy,
+        deadline: Deadline::none(),
+    };
+    let patch = fill(&ctx).unwrap();
+    check_topology(mesh, &hole.vertices, &patch).unwrap();
+    let pos = patch_positions(mesh, &hole.vertices, &patch);
+    check_degenerate(&pos, &patch, &policy.checks).unwrap();
+    let before: Vec<DVec3> = mesh.positions.clone();
+    apply_patch(mesh, hole, &patch).unwrap();
+    mesh.validate().unwrap();
+    assert!(mesh
+        .topo
+        .boundary_loops()
+        .iter()
+        .all(|l| l.len() != hole.len() || l != &hole.vertices));
+    // untouched input vertices are bit-exact
+    assert_eq!(&mesh.positions[..before.len()], &before[..]);
+    patch
+}
+
+fn q_share(mesh: &Mesh, hole: &Hole, patch: &Patch) -> f64 {
+    let pos = patch_positions(mesh, &hole.vertices, patch);
+    quality(&pos, hole.len(), patch).q_good_share
+}
+
+/// Grid of (n+1)^2 vertices on z = 0 with the cells within `rad` of the centre removed.
+fn planar_grid_hole(n: usize, rad: f64) -> RawMesh {
+    let mut raw = RawMesh::default();
+    for j in 0..=n {
+        for i in 0..=n {
+            raw.positions.push(DVec3::new(i as f64, j as f64, 0.0));
+        }
+    }
+    let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
+    for j in 0..n {
+        for i in 0..n {
+            raw.faces.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+            raw.faces.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+        }
+    }
+    let c = DVec3::new(n as f64 / 2.0, n as f64 / 2.0, 0.0);
+    cut(&raw, |p| (p - c).length() < rad)
+}
+
+fn interior_loop(n: usize) -> impl Fn(&Mesh, &[VertexId]) -> bool {
+    move |m: &Mesh, l: &[VertexId]| {
+        l.iter().all(|&v| {
+            let p = m.pos(v);
+            p.x > 0.0 && p.y > 0.0 && p.x < n as f64 && p.y < n as f64
+        })
+    }
+}
+
+#[test]
+fn planar_hole_gives_a_planar_patch() {
+    for weights in [Weights::Cotangent, Weights::Uniform, Weights::Fujiwara] {
+        for c in 0..=3u8 {
+            let raw = planar_grid_hole(24, 7.3);
+            let (mut mesh, hole, mut policy) = mesh_and_hole(&raw, interior_loop(24));
+            policy.fair.weights = weights;
+            policy.fair.continuity = c;
+            let patch = fill_checked(&mut mesh, &hole, &policy);
+            assert!(!patch.new_vertices.is_empty());
+            for p in &patch.new_vertices {
+                assert!(p.z.abs() < 1e-9, "{weights:?} c={c}: {p}");
+            }
+            // refined to the surrounding density: edges near 1 (grid spacing)
+            // cotangent weights keep the refined layout on a plane (linear precision);
+            // the staircase boundary of a grid hole (right angles, 1 and sqrt 2 edges)
+            // caps the share of near-equilateral triangles along it
+            if weights == Weights::Cotangent {
+                let share = q_share(&mesh, &hole, &patch);
+                eprintln!("planar c={c}: q share {share:.3}");
+                assert!(share > 0.7, "{weights:?} c={c}: q share {share}");
+            }
+        }
+    }
+}
+
+fn sphere_case(level: usize, angle_deg: f64) -> (Mesh, Hole, Policy) {
+    let r = 10.0;
+    let raw = icosphere(level, r);
+    let dir = DVec3::new(0.3, 0.5, 0.8).normalize();
+    let raw = cut(&raw, |p| {
+        p.normalize().dot(dir) > angle_deg.to_radians().cos()
+    });
+    mesh_and_hole(&raw, |_, _| true)
+}
+
+/// (mean |r - R| / R, max |r - R| / R) of the new vertices.
+fn sphere_error(patch: &Patch, r: f64) -> (f64, f64) {
+    let n = patch.new_vertices.len() as f64;
+    let errs: Vec<f64> = patch
+        .new_vertices
+        .iter()
+        .map(|p| (p.length() - r).abs() / r)
+        .collect();
+    (
+        errs.iter().sum::<f64>() / n,
+        errs.iter().cloned().fold(0.0, f64::max),
+    )
+}
+
+#[test]
+fn sphere_hole_of_about_20_vertices() {
+    let (mut mesh, hole, policy) = sphere_case(4, 14.0);
+    assert!((15..=30).contains(&hole.len()), "loop of {}", hole.len());
+    let patch = fill_checked(&mut mesh, &hole, &policy);
+    let (mean, max) = sphere_error(&patch, 10.0);
+    let share = q_share(&mesh, &hole, &patch);
+    eprintln!(
+        "sphere k={} new={} mean={mean:.5} max={max:.5} q={share:.3}",
+        hole.len(),
+        patch.new_vertices.len()
+    );
+    assert!(mean < 0.002, "mean radial error {mean}");
+    assert!(share > 0.8, "q share {share}");
+}
+
+#[test]
+fn sphere_hole_of_about_100_vertices() {
+    let (mut mesh, hole, policy) = sphere_case(5, 37.0);
+    assert!((80..=140).contains(&hole.len()), "loop of {}", hole.len());
+    let patch = fill_checked(&mut mesh, &hole, &policy);
+    let (mean, max) = sphere_error(&patch, 10.0);
+    let share = q_share(&mesh, &hole, &patch);
+    eprintln!(
+        "sphere k={} new={} mean={mean:.5} max={max:.5} q={share:.3}",
+        hole.len(),
+        patch.new_vertices.len()
+    );
+    assert!(mean < 0.01, "mean radial error {mean}");
+    assert!(share > 0.8, "q share {share}");
+}
+
+fn cylinder_case() -> (Mesh, Hole, Policy, f64) {
+    // open cylinder of radius 5 along z, 64 segments, 40 rings of height 0.5
+    let (r, seg, rings, dz) = (5.0, 64usize, 40usize, 0.5);
+    let mut raw = RawMesh::default();
+    for j in 0..=rings {
+        for i in 0..seg {
+            let t = i as f64 / seg as f64 * std::f64::consts::TAU;
+            raw.positions
+                .push(DVec3::new(r * t.cos(), r * t.sin(), j as f64 * dz));
+        }
+    }
+    let id = |i: usize, j: usize| (j * seg + i % seg) as u32;
+    for j in 0..rings {
+        for i in 0..seg {
+            raw.faces.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+            raw.faces.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+        }
+    }
+    let centre = DVec3::new(r, 0.0, 10.0);
+    let raw = cut(&raw, |p| (p - centre).length() < 2.6);
+    let top = rings as f64 * dz;
+    let (m, h, p) = mesh_and_hole(&raw, move |m, l| {
+        l.iter().all(|&v| m.pos(v).z > 0.0 && m.pos(v).z < top)
+    });
+    (m, h, p, r)
+}
+
+#[test]
+fn cylinder_hole_stays_on_the_cylinder() {
+    let (mut mesh, hole, policy, r) = cylinder_case();
+    let patch = fill_checked(&mut mesh, &hole, &policy);
+    let errs: Vec<f64> = patch
+        .new_vertices
+        .iter()
+        .map(|p| ((p.x * p.x + p.y * p.y).sqrt() - r).abs() / r)
+        .collect();
+    let mean = errs.iter().sum::<f64>() / errs.len() as f64;
+    let max = errs.iter().cloned().fold(0.0, f64::max);
+    let share = q_share(&mesh, &hole, &patch);
+    eprintln!(
+        "cylinder k={} new={} mean={mean:.5} max={max:.5} q={share:.3}",
+        hole.len(),
+        patch.new_vertices.len()
+    );
+    assert!(mean < 0.01, "mean radial error {mean}");
+    assert!(max < 0.03, "max radial error {max}");
+    assert!(share > 0.8, "q share {share}");
+}
+
+#[test]
+fn dihedral_weight_also_fills_the_sphere() {
+    let (mut mesh, hole, mut policy) = sphere_case(4, 14.0);
+    policy.refine.weight = TriangulationWeight::DihedralArea;
+    let patch = fill_checked(&mut mesh, &hole, &policy);
+    let (mean, _) = sphere_error(&patch, 10.0);
+    assert!(mean < 0.002, "mean radial error {mean}");
+}
+
+#[test]
+fn higher_continuity_fits_the_sphere_better_than_membrane() {
+    let mut errs = Vec::new();
+    for c in 1..=3u8 {
+        let (mut mesh, hole, mut policy) = sphere_case(5, 30.0);
+        policy.fair.continuity = c;
+        let patch = fill_checked(&mut mesh, &hole, &policy);
+        errs.push(sphere_error(&patch, 10.0).0);
+    }
+    eprintln!("sphere errors by continuity {errs:?}");
+    // a membrane is flat-ish: it sags well inside the sphere
+    assert!(errs[1] < errs[0] / 3.0, "{errs:?}");
+    assert!(errs[2] < errs[0] / 3.0, "{errs:?}");
+}
+
+/// A loop with no surrounding mesh but its own ring: an annulus of one strip.
+fn annulus(k: usize, wave: f64) -> (Mesh, Hole, Policy) {
+    let mut raw = RawMesh::default();
+    for i in 0..k {
+        let t = i as f64 / k as f64 * std::f64::consts::TAU;
+        let r = k as f64 / std::f64::consts::TAU;
+        let z = wave * r * (2.0 * t).cos() * 0.3;
+        raw.positions.push(DVec3::new(r * t.cos(), r * t.sin(), z));
+        raw.positions
+            .push(DVec3::new((r + 1.0) * t.cos(), (r + 1.0) * t.sin(), z));
+    }
+    for i in 0..k {
+        let j = (i + 1) % k;
+        let (a, b, c, d) = (
+            2 * i as u32,
+            2 * j as u32,
+            2 * j as u32 + 1,
+            2 * i as u32 + 1,
+        );
+        raw.faces.push([a, b, c]);
+        raw.faces.push([a, c, d]);
+    }
+    mesh_and_hole(&raw, |m, l| {
+        l.iter().all(|&v| v.idx() % 2 == 0 && m.pos(v).is_finite())
+    })
+}
+
+#[test]
+fn long_loops_are_filled() {
+    // a full fill of a 300-vertex loop, flat and saddle-like (a 1,000-vertex one takes
+    // seconds in the test profile; its triangulation is tested below)
+    for wave in [0.0, 1.0] {
+        let (mut mesh, hole, policy) = annulus(300, wave);
+        let patch = fill_checked(&mut mesh, &hole, &policy);
+        if wave == 0.0 {
+            assert!(patch.new_vertices.iter().all(|p| p.z.abs() < 1e-9));
+        }
+        assert!(patch.new_vertices.len() > 1000);
+    }
+}
+
+#[test]
+fn thousand_vertex_loops_triangulate() {
+    for wave in [0.0, 1.0] {
+        let (mesh, hole, policy) = annulus(1000, wave);
+        let pts: Vec<DVec3> = hole.vertices.iter().map(|&v| mesh.pos(v)).collect();
+        let forbidden = forbidden_chords(&mesh, &hole.vertices);
+        let outside = outside_normals(&mesh, &hole.vertices);
+        for weight in [TriangulationWeight::Area, TriangulationWeight::DihedralArea] {
+            let input = triangulate::LoopInput {
+                pts: &pts,
+                forbidden: &forbidden,
+                outside_normals: &outside,
+                weight,
+                min_angle: policy.checks.min_angle_deg.to_radians(),
+                restricted_above: policy.refine.restricted_search_above,
+                deadline: Deadline::none(),
+            };
+            let tris = triangulate::triangulate(&input).unwrap();
+            let patch = Patch {
+                new_vertices: Vec::new(),
+                triangles: tris,
+            };
+            check_topology(&mesh, &hole.vertices, &patch).unwrap();
+        }
+    }
+}
+
+#[test]
+fn ten_thousand_vertex_loop_triangulates() {
+    let k = 10_000;
+    let pts: Vec<DVec3> = (0..k)
+        .map(|i| {
+            let t = -(i as f64) / k as f64 * std::f64::consts::TAU;
+            DVec3::new(t.cos(), t.sin(), 0.2 * (5.0 * t).sin())
+        })
+        .collect();
+    let forbidden = HashSet::new();
+    let outside = vec![None; k];
+    let input = triangulate::LoopInput {
+        pts: &pts,
+        forbidden: &forbidden,
+        outside_normals: &outside,
+        weight: TriangulationWeight::DihedralArea,
+        min_angle: 0.0,
+        restricted_above: 60,
+        deadline: Deadline::none(),
+    };
+    let tris = triangulate::triangulate(&input).unwrap();
+    assert_eq!(tris.len(), k - 2);
+}
+
+/// A mesh whose hole is a star-shaped polygon: the polygon plus a one-strip collar.
+fn star_hole(radii: &[f64], lift: f64) -> (Mesh, Hole, Policy) {
+    let k = radii.len();
+    let mut raw = RawMesh::default();
+    for (i, &r) in radii.iter().enumerate() {
+        let t = i as f64 / k as f64 * std::f64::consts::TAU;
+        let z = lift * (3.0 * t).sin();
+        raw.positions.push(DVec3::new(r * t.cos(), r * t.sin(), z));
+        raw.positions
+            .push(DVec3::new((r + 0.5) * t.cos(), (r + 0.5) * t.sin(), z));
+    }
+    for i in 0..k {
+        let j = (i + 1) % k;
+        let (a, b, c, d) = (
+            2 * i as u32,
+            2 * j as u32,
+            2 * j as u32 + 1,
+            2 * i as u32 + 1,
+        );
+        raw.faces.push([a, b, c]);
+        raw.faces.push([a, c, d]);
+    }
+    mesh_and_hole(&raw, |_, l| l.iter().all(|&v| v.idx() % 2 == 0))
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+    #[test]
+    fn random_star_polygons_give_disk_patches(
+        radii in proptest::collection::vec(0.5f64..2.0, 5..90),
+        lift in 0.0f64..0.5,
+        restricted in 3usize..80,
+    ) {
+        let (mut mesh, hole, mut policy) = star_hole(&radii, lift);
+        policy.refine.restricted_search_above = restricted;
+        let ctx = FillContext { mesh: &mesh, hole: &hole, policy: &policy, deadline: Deadline::none() };
+        let patch = fill(&ctx).unwrap();
+        check_topology(&mesh, &hole.vertices, &patch).unwrap();
+        apply_patch(&mut mesh, &hole, &patch).unwrap();
+        mesh.validate().unwrap();
+    }
+}
+#[test]
+fn voronoi_normalisation_beats_the_raw_cotangent_operator_on_the_sphere() {
+    // the reason fair.rs normalises by the mixed Voronoi area: the refined patch has
+    // smaller triangles than the ring around it
+    for (level, angle) in [(4usize, 14.0f64), (5, 30.0)] {
+        let (mesh, hole, policy) = sphere_case(level, angle);
+        let ctx = FillContext {
+            mesh: &mesh,
+            hole: &hole,
+            policy: &policy,
+            deadline: Deadline::none(),
+        };
+        let patch = fill(&ctx).unwrap();
+        let err = |norm| {
+            let local = fair::local_from_patch(&mesh, &hole, &patch, 2);
+            let s = fair::FairSolver::new(&local, 2, Weights::Cotangent, norm).unwrap();
+            let p = Patch {
+                new_vertices: s.solve().unwrap(),
+                triangles: patch.triangles.clone(),
+            };
+            sphere_error(&p, 10.0).0
+        };
+        let (raw, vor) = (
+            err(fair::Normalization::None),
+            err(fair::Normalization::VoronoiArea),
+        );
+        assert!(vor < raw / 2.0, "voronoi {vor} raw {raw}");
+    }
+}

@@ -1,0 +1,134 @@
+//! Atomic file output: a temporary file in the target's folder, written through a
+//! buffer, synced, renamed over the target, and the folder synced. On any failure
+//! the temporary file is removed, so the target is either the old file or the
+//! complete new one, never a partial file.
+
+use super::{io_error, IoError, BUF_CAPACITY};
+use std::fs::{File, OpenOptions};
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Distinguishes temporary files of concurrent writes from one process.
+static COUNTER: AtomicU64 = AtomicU64::new(0);
+
+/// Writes bytes atomically: a temporary file in the same folder, fsync, rename.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
+    write_with(path, |w| w.write_all(bytes))
+}
+
+/// Runs `body` on a buffered writer to a temporary file next to `path`, then syncs
+/// and renames it over `path`. Errors name `path`.
+pub(crate) fn write_with<F>(path: &Path, body: F) -> Result<(), IoError>
+where
+    F: FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
+{
+    let name = path.file_name().ok_or_else(|| {
+        io_error(
+            path,
+            std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a file name"),
+        )
+    })?;
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let mut tmp_name = std::ffi::OsString::from(".");
+    tmp_name.push(name);
+    tmp_name.push(format!(
+        ".tmp-{}-{}",
+        std::process::id(),
+        COUNTER.fetch_add(1, Ordering::Relaxed)
+    ));
+    let tmp = dir.join(tmp_name);
+
+    let file = OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&tmp)
+        .map_err(|e| io_error(path, e))?;
+    let result = (|| -> std::io::Result<()> {
+        let mut w = BufWriter::with_capacity(BUF_CAPACITY, file);
+        body(&mut w)?;
+        let file = w.into_inner().map_err(|e| e.into_error())?;
+        file.sync_all()?;
+        drop(file);
+        std::fs::rename(&tmp, path)
+    })();
+    if let Err(e) = result {
+        // Best effort: the original error is what matters.
+        let _ = std::fs::remove_file(&tmp);
+        return Err(io_error(path, e));
+    }
+    sync_dir(&dir).map_err(|e| io_error(path, e))
+}
+
+/// Makes the rename durable (a no-op where folders cannot be opened as files).
+#[cfg(unix)]
+fn sync_dir(dir: &Path) -> std::io::Result<()> {
+    File::open(dir)?.sync_all()
+}
+
+#[cfg(not(unix))]
+fn sync_dir(_dir: &Path) -> std::io::Result<()> {
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn leftovers(dir: &Path) -> Vec<String> {
+        std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.contains(".tmp-"))
+            .collect()
+    }
+
+    #[test]
+    fn writes_and_replaces() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("out.json");
+        write_atomic(&p, b"first").unwrap();
+        write_atomic(&p, b"second").unwrap();
+        assert_eq!(std::fs::read(&p).unwrap(), b"second");
+        assert!(leftovers(d.path()).is_empty());
+    }
+
+    #[test]
+    fn failing_body_leaves_old_file_and_no_temp() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("out.txt");
+        write_atomic(&p, b"old").unwrap();
+        let err = write_with(&p, |w| {
+            w.write_all(b"partial")?;
+            Err(std::io::Error::other("disk full"))
+        })
+        .unwrap_err();
+        assert!(matches!(err, IoError::Io { .. }));
+        assert!(err.to_string().contains("out.txt"), "{err}");
+        assert_eq!(std::fs::read(&p).unwrap(), b"old");
+        assert!(leftovers(d.path()).is_empty());
+    }
+
+    #[test]
+    fn missing_folder_is_an_io_error_naming_the_file() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("no/such/dir/out.obj");
+        let err = write_atomic(&p, b"x").unwrap_err();
+        assert!(matches!(err, IoError::Io { .. }));
+        assert!(err.to_string().contains("out.obj"));
+    }
+
+    #[test]
+    fn rename_onto_a_directory_fails_cleanly() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("target");
+        std::fs::create_dir(&p).unwrap();
+        std::fs::write(p.join("keep"), b"k").unwrap();
+        assert!(write_atomic(&p, b"x").is_err());
+        assert!(leftovers(d.path()).is_empty());
+        assert!(p.join("keep").exists());
+    }
+}

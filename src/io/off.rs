@@ -1,0 +1,305 @@
+//! Geomview OFF (with the `C`, `N` and `ST` prefixes: `COFF`, `NOFF`, `CNOFF`,
+//! `STCOFF`, ...). ASCII only.
+//!
+//! Layout: the keyword line (the counts may follow on it), `nv nf ne`, then one
+//! vertex per line `x y z [nx ny nz] [r g b [a]] [s t]`, then one face per line
+//! `n i0 .. i(n-1) [colour]`. `#` starts a comment. Colours are integers 0..255
+//! (divided by 255) or reals in `[0, 1]` (kept); a vertex line's colour is read as
+//! integers when all its components are integers. Polygons are fanned; face colours
+//! are ignored.
+
+use super::text::{has_nul, parse_coord, parse_f64, parse_i64, show, strip_comment, tokens};
+use super::text::{Lines, Next, MAX_LINE};
+use super::{color_byte, io_error, malformed, IoError, Precision, RawMesh, MAX_ELEMENTS};
+use glam::DVec3;
+use std::io::{BufRead, Write};
+use std::path::Path;
+
+/// The next line that is not blank after removing comments.
+fn content_line<'a, R: BufRead>(
+    path: &Path,
+    lines: &'a mut Lines<R>,
+) -> Result<Option<(usize, &'a [u8])>, IoError> {
+    loop {
+        // Re-borrow per iteration: the returned slice must come from the last call.
+        let skip = match lines.next_line(MAX_LINE).map_err(|e| io_error(path, e))? {
+            Next::Eof => return Ok(None),
+            Next::TooLong(ln) => return Err(malformed(path, Some(ln), "line too long")),
+            Next::Line(ln, l) => {
+                if has_nul(l) {
+                    return Err(malformed(
+                        path,
+                        Some(ln),
+                        "binary data (NUL byte) in an OFF file (binary OFF is not supported)",
+                    ));
+                }
+                tokens(strip_comment(l)).next().is_none()
+            }
+        };
+        if !skip {
+            break;
+        }
+    }
+    // The line just read is in the buffer; hand it out.
+    Ok(lines.current().map(|(ln, l)| (ln, strip_comment(l))))
+}
+
+/// Parses count tokens (the first two are the vertex and face counts).
+fn take_counts<'t>(
+    path: &Path,
+    toks: impl Iterator<Item = &'t [u8]>,
+    ln: usize,
+    counts: &mut [u64; 2],
+    found: &mut usize,
+) -> Result<(), IoError> {
+    for t in toks {
+        if t.eq_ignore_ascii_case(b"BINARY") {
+            return Err(malformed(path, Some(ln), "binary OFF is not supported"));
+        }
+        if *found < 2 {
+            let v = parse_i64(t)
+                .and_then(|v| u64::try_from(v).ok())
+                .ok_or_else(|| malformed(path, Some(ln), format!("bad OFF count '{}'", show(t))))?;
+            if let Some(slot) = counts.get_mut(*found) {
+                *slot = v;
+            }
+            *found += 1;
+        }
+    }
+    Ok(())
+}
+
+/// Reads an OFF file of `len` bytes.
+pub(crate) fn read<R: BufRead>(path: &Path, reader: R, len: u64) -> Result<RawMesh, IoError> {
+    let mut lines = Lines::new(reader);
+    let Some((ln, first)) = content_line(path, &mut lines)? else {
+        return Err(malformed(path, None, "empty OFF file"));
+    };
+    let mut toks = tokens(first);
+    let kw = toks.next().unwrap_or(b"");
+    let Some(kind) = kw.strip_suffix(b"OFF") else {
+        return Err(malformed(
+            path,
+            Some(ln),
+            format!("not an OFF file: it starts with '{}', not 'OFF'", show(kw)),
+        ));
+    };
+    let mut rest = kind;
+    let st = if let Some(r) = rest.strip_prefix(b"ST") {
+        rest = r;
+        true
+    } else {
+        false
+    };
+    let color = if let Some(r) = rest.strip_prefix(b"C") {
+        rest = r;
+        true
+    } else {
+        false
+    };
+    let normals = if let Some(r) = rest.strip_prefix(b"N") {
+        rest = r;
+        true
+    } else {
+        false
+    };
+    if !rest.is_empty() {
+        return Err(malformed(
+            path,
+            Some(ln),
+            format!("unsupported OFF variant '{}'", show(kw)),
+        ));
+    }
+    // Counts: on the keyword line or the next content line.
+    let mut counts = [0u64; 2];
+    let mut found = 0;
+    let mut counts_line = ln;
+    take_counts(path, toks, ln, &mut counts, &mut found)?;
+    if found == 0 {
+        let Some((ln2, l)) = content_line(path, &mut lines)? else {
+            return Err(malformed(path, None, "truncated file: no OFF counts line"));
+        };
+        counts_line = ln2;
+        take_counts(path, tokens(l), ln2, &mut counts, &mut found)?;
+    }
+    if found < 2 {
+        return Err(malformed(
+            path,
+            Some(counts_line),
+            "the OFF counts line needs the vertex and face counts",
+        ));
+    }
+    let [nv, nf] = counts;
+    let remaining = len.saturating_sub(lines.consumed());
+    let bad_counts = |m: String| malformed(path, Some(counts_line), m);
+    if nv > MAX_ELEMENTS || nf > MAX_ELEMENTS {
+        return Err(bad_counts(format!(
+            "{nv} vertices / {nf} faces exceed the limit of {MAX_ELEMENTS}"
+        )));
+    }
+    // Shortest vertex line "0 0 0\n", shortest face line "3 0 0 0\n" (the last
+    // line may lack its newline).
+    let need = (u128::from(nv) * 6 + u128::from(nf) * 8).saturating_sub(1);
+    if need > u128::from(remaining) {
+        return Err(bad_counts(format!(
+            "the header claims {nv} vertices and {nf} faces, but only {remaining} bytes follow"
+        )));
+    }
+
+    let mut raw = RawMesh {
+        precision: Precision::F64,
+        ..RawMesh::default()
+    };
+    raw.positions.reserve(nv as usize);
+    let mut colors: Vec<[f32; 3]> = Vec::new();
+    if color {
+        colors.reserve(nv as usize);
+    }
+    let mut missing_color = 0u64;
+    for i in 0..nv {
+        let Some((ln, l)) = content_line(path, &mut lines)? else {
+            return Err(malformed(
+                path,
+                None,
+                format!("truncated file: it ends after {i} of {nv} vertices"),
+            ));
+        };
+        let bad = |m: String| malformed(path, Some(ln), m);
+        let mut t = tokens(l);
+        let mut p = [0.0f64; 3];
+        for c in p.iter_mut() {
+            let tok = t
+                .next()
+                .ok_or_else(|| bad("a vertex needs 3 coordinates".into()))?;
+            *c = parse_coord(tok).map_err(&bad)?;
+        }
+        raw.positions.push(DVec3::from_array(p));
+        if normals {
+            for _ in 0..3 {
+                t.next()
+                    .ok_or_else(|| bad("missing vertex normal".into()))?;
+            }
+        }
+        if color {
+            // Up to 4 colour components and 2 texture coordinates (no allocation).
+            let mut rest: [&[u8]; 6] = [b""; 6];
+            let mut k = 0;
+            for tok in t {
+                if let Some(slot) = rest.get_mut(k) {
+                    *slot = tok;
+                    k += 1;
+                }
+            }
+            let n = k.saturating_sub(if st { 2 } else { 0 });
+            let comps = rest.get(..n.min(4)).unwrap_or(&[]);
+            if comps.len() < 3 {
+                missing_color += 1;
+                colors.push([1.0; 3]);
+                continue;
+            }
+            let ints = comps.iter().all(|c| parse_i64(c).is_some());
+            let mut c = [0.0f32; 3];
+            for (slot, tok) in c.iter_mut().zip(comps) {
+                let v = parse_f64(tok)
+                    .filter(|v| v.is_finite())
+                    .ok_or_else(|| bad(format!("bad colour value '{}'", show(tok))))?;
+                *slot = if ints { (v / 255.0) as f32 } else { v as f32 };
+            }
+            colors.push(c);
+        }
+    }
+    raw.faces.reserve(nf as usize);
+    let mut polygons = 0u64;
+    for i in 0..nf {
+        let Some((ln, l)) = content_line(path, &mut lines)? else {
+            return Err(malformed(
+                path,
+                None,
+                format!("truncated file: it ends after {i} of {nf} faces"),
+            ));
+        };
+        let bad = |m: String| malformed(path, Some(ln), m);
+        let mut t = tokens(l);
+        let n_tok = t.next().unwrap_or(b"");
+        let n = parse_i64(n_tok)
+            .ok_or_else(|| bad(format!("'{}' is not a face vertex count", show(n_tok))))?;
+        if n < 3 {
+            return Err(bad(format!("a face needs at least 3 vertices, found {n}")));
+        }
+        if n > 3 {
+            polygons += 1;
+        }
+        let (mut first, mut prev) = (0u32, 0u32);
+        for j in 0..n {
+            let tok = t
+                .next()
+                .ok_or_else(|| bad(format!("the face lists fewer than {n} vertices")))?;
+            let v = parse_i64(tok)
+                .ok_or_else(|| bad(format!("'{}' is not a vertex index", show(tok))))?;
+            let v = u32::try_from(v)
+                .ok()
+                .filter(|&v| u64::from(v) < nv)
+                .ok_or_else(|| bad(format!("vertex index {v} out of range ({nv} vertices)")))?;
+            match j {
+                0 => first = v,
+                1 => prev = v,
+                _ => {
+                    if raw.faces.len() as u64 >= MAX_ELEMENTS {
+                        return Err(bad(format!("more than {MAX_ELEMENTS} triangles")));
+                    }
+                    raw.faces.push([first, prev, v]);
+                    prev = v;
+                }
+            }
+        }
+    }
+    if color {
+        if missing_color == 0 {
+            raw.colors = Some(colors);
+        } else {
+            raw.notes.push(format!(
+                "COFF vertex colours dropped: {missing_color} vertices have none"
+            ));
+        }
+    }
+    if polygons > 0 {
+        raw.notes.push(format!(
+            "fanned {polygons} OFF polygons with more than 3 vertices into triangles"
+        ));
+    }
+    Ok(raw)
+}
+
+/// Writes `OFF` (or `COFF` with 0..255 colours and alpha 255 when there are colours).
+pub(crate) fn write<W: Write>(w: &mut W, raw: &RawMesh) -> std::io::Result<()> {
+    let f32 = raw.precision == Precision::F32;
+    let colors = raw.colors.as_deref();
+    writeln!(
+        w,
+        "{}\n{} {} 0",
+        if colors.is_some() { "COFF" } else { "OFF" },
+        raw.positions.len(),
+        raw.faces.len()
+    )?;
+    for (i, p) in raw.positions.iter().enumerate() {
+        super::write_real(w, p.x, f32)?;
+        w.write_all(b" ")?;
+        super::write_real(w, p.y, f32)?;
+        w.write_all(b" ")?;
+        super::write_real(w, p.z, f32)?;
+        if let Some(c) = colors.and_then(|c| c.get(i)) {
+            write!(
+                w,
+                " {} {} {} 255",
+                color_byte(c[0]),
+                color_byte(c[1]),
+                color_byte(c[2])
+            )?;
+        }
+        w.write_all(b"\n")?;
+    }
+    for f in &raw.faces {
+        writeln!(w, "3 {} {} {}", f[0], f[1], f[2])?;
+    }
+    Ok(())
+}

@@ -1,0 +1,881 @@
+//! Stanford PLY: `ascii`, `binary_little_endian` and `binary_big_endian`.
+//!
+//! Vertex `x`/`y`/`z` of any scalar type, optional `red`/`green`/`blue` colours
+//! (integer types scaled to `[0, 1]`, floats kept), faces from the `vertex_indices`
+//! (or `vertex_index`) list of the `face` element with any integer count and index
+//! types. Other properties (scalar or list) and other elements are skipped. Polygons
+//! are fanned. The header's counts are checked against the bytes that follow it
+//! before anything is allocated.
+
+use super::text::{has_nul, parse_coord, parse_coord_f32, parse_f64, parse_i64, show, tokens};
+use super::text::{Lines, Next, MAX_LINE};
+use super::{color_byte, MAX_ELEMENTS};
+use super::{io_error, malformed, read_error, Encoding, IoError, Precision, RawMesh};
+use glam::DVec3;
+use std::io::{BufRead, Read, Write};
+use std::path::Path;
+
+/// Longest header line accepted.
+const MAX_HEADER_LINE: u64 = 64 * 1024;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Scalar {
+    I8,
+    U8,
+    I16,
+    U16,
+    I32,
+    U32,
+    F32,
+    F64,
+}
+
+impl Scalar {
+    fn parse(s: &[u8]) -> Option<Scalar> {
+        Some(match s {
+            b"char" | b"int8" => Scalar::I8,
+            b"uchar" | b"uint8" => Scalar::U8,
+            b"short" | b"int16" => Scalar::I16,
+            b"ushort" | b"uint16" => Scalar::U16,
+            b"int" | b"int32" => Scalar::I32,
+            b"uint" | b"uint32" => Scalar::U32,
+            b"float" | b"float32" => Scalar::F32,
+            b"double" | b"float64" => Scalar::F64,
+            _ => return None,
+        })
+    }
+    fn size(self) -> u64 {
+        match self {
+            Scalar::I8 | Scalar::U8 => 1,
+            Scalar::I16 | Scalar::U16 => 2,
+            Scalar::I32 | Scalar::U32 | Scalar::F32 => 4,
+            Scalar::F64 => 8,
+        }
+    }
+    fn is_int(self) -> bool {
+        !matches!(self, Scalar::F32 | Scalar::F64)
+    }
+    /// True when every value of the type is exactly an `f32`.
+    fn fits_f32(self) -> bool {
+        matches!(
+            self,
+            Scalar::I8 | Scalar::U8 | Scalar::I16 | Scalar::U16 | Scalar::F32
+        )
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Kind {
+    Scalar(Scalar),
+    List(Scalar, Scalar),
+}
+
+#[derive(Debug)]
+struct Prop {
+    name: String,
+    kind: Kind,
+}
+
+#[derive(Debug)]
+struct Element {
+    name: String,
+    count: u64,
+    props: Vec<Prop>,
+    line: usize,
+}
+
+impl Element {
+    /// The fewest bytes one instance can take.
+    fn min_size(&self, encoding: Encoding) -> u64 {
+        match encoding {
+            // A value is at least one character and a separator.
+            Encoding::Ascii => 2 * self.props.len() as u64,
+            _ => self
+                .props
+                .iter()
+                .map(|p| match p.kind {
+                    Kind::Scalar(t) => t.size(),
+                    Kind::List(c, _) => c.size(),
+                })
+                .sum(),
+        }
+    }
+}
+
+/// What a vertex property is used for.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Role {
+    X,
+    Y,
+    Z,
+    R,
+    G,
+    B,
+    Skip,
+}
+
+/// Reads a PLY file of `len` bytes.
+pub(crate) fn read<R: BufRead>(path: &Path, reader: R, len: u64) -> Result<RawMesh, IoError> {
+    let mut lines = Lines::new(reader);
+    let (encoding, elements) = read_header(path, &mut lines)?;
+    let remaining = len.saturating_sub(lines.consumed());
+
+    // Roles and sanity of the header before any allocation.
+    let mut vertex: Option<usize> = None;
+    let mut face: Option<usize> = None;
+    let mut need: u128 = 0;
+    for (k, el) in elements.iter().enumerate() {
+        let bad = |m: String| malformed(path, Some(el.line), m);
+        if el.count > 0 && el.props.is_empty() {
+            return Err(bad(format!("element '{}' has no properties", el.name)));
+        }
+        if el.name == "vertex" || el.name == "face" {
+            if el.count > MAX_ELEMENTS {
+                return Err(bad(format!(
+                    "{} '{}' elements exceed the limit of {MAX_ELEMENTS}",
+                    el.count, el.name
+                )));
+            }
+            let slot = if el.name == "vertex" {
+                &mut vertex
+            } else {
+                &mut face
+            };
+            if slot.is_some() {
+                return Err(bad(format!("a second '{}' element", el.name)));
+            }
+            *slot = Some(k);
+        }
+        need += u128::from(el.count) * u128::from(el.min_size(encoding));
+        // The last ASCII value needs no separator.
+        let slack = u128::from(encoding == Encoding::Ascii);
+        if need.saturating_sub(slack) > u128::from(remaining) {
+            return Err(bad(format!(
+                "the header claims {} '{}' elements, but only {remaining} bytes follow the header",
+                el.count, el.name
+            )));
+        }
+    }
+    let vi = vertex.ok_or_else(|| malformed(path, None, "no 'vertex' element"))?;
+    let fi = face.ok_or_else(|| malformed(path, None, "no 'face' element"))?;
+    let (vel, fel) = match (elements.get(vi), elements.get(fi)) {
+        (Some(v), Some(f)) => (v, f),
+        _ => return Err(malformed(path, None, "internal: element index")),
+    };
+
+    let mut roles = Vec::with_capacity(vel.props.len());
+    let mut xyz_types = Vec::new();
+    let mut color_types = Vec::new();
+    for p in &vel.props {
+        let role = match p.name.as_str() {
+            "x" => Role::X,
+            "y" => Role::Y,
+            "z" => Role::Z,
+            "red" | "diffuse_red" | "r" => Role::R,
+            "green" | "diffuse_green" | "g" => Role::G,
+            "blue" | "diffuse_blue" | "b" => Role::B,
+            _ => Role::Skip,
+        };
+        let role = match (role, p.kind) {
+            (Role::Skip, _) => Role::Skip,
+            (r, Kind::Scalar(t)) => {
+                let list = if matches!(r, Role::X | Role::Y | Role::Z) {
+                    &mut xyz_types
+                } else {
+                    &mut color_types
+                };
+                if roles.contains(&r) {
+                    return Err(malformed(
+                        path,
+                        Some(vel.line),
+                        format!("vertex property '{}' appears twice", p.name),
+                    ));
+                }
+                list.push(t);
+                r
+            }
+            (_, Kind::List(..)) => {
+                return Err(malformed(
+                    path,
+                    Some(vel.line),
+                    format!("vertex property '{}' is a list, expected a number", p.name),
+                ))
+            }
+        };
+        roles.push(role);
+    }
+    if xyz_types.len() != 3 {
+        return Err(malformed(
+            path,
+            Some(vel.line),
+            "the vertex element needs properties x, y and z",
+        ));
+    }
+    let has_color = color_types.len() == 3;
+    let mut notes = Vec::new();
+    if !color_types.is_empty() && !has_color {
+        notes.push("PLY vertex colours dropped: not all of red, green, blue present".to_string());
+        for r in roles.iter_mut() {
+            if matches!(r, Role::R | Role::G | Role::B) {
+                *r = Role::Skip;
+            }
+        }
+    }
+    let index_prop = fel
+        .props
+        .iter()
+        .position(|p| p.name == "vertex_indices" || p.name == "vertex_index");
+    match index_prop.and_then(|i| fel.props.get(i)).map(|p| p.kind) {
+        Some(Kind::List(c, t)) if c.is_int() && t.is_int() => {}
+        Some(_) => {
+            return Err(malformed(
+                path,
+                Some(fel.line),
+                "face vertex indices must be a list of integers",
+            ))
+        }
+        None if fel.count > 0 => {
+            return Err(malformed(
+                path,
+                Some(fel.line),
+                "the face element has no 'vertex_indices' list",
+            ))
+        }
+        None => {}
+    }
+
+    let precision = if xyz_types.iter().all(|t| t.fits_f32()) {
+        Precision::F32
+    } else {
+        Precision::F64
+    };
+    let mut raw = RawMesh {
+        precision,
+        encoding,
+        ..RawMesh::default()
+    };
+    // Capacity: never more than the bytes left can hold.
+    let cap = |el: &Element| -> usize {
+        let per = el.min_size(encoding).max(1);
+        el.count.min(remaining / per).min(MAX_ELEMENTS) as usize
+    };
+    raw.positions.reserve(cap(vel));
+    if has_color {
+        raw.colors = Some(Vec::with_capacity(cap(vel)));
+    }
+    raw.faces.reserve(cap(fel));
+
+    let mut body = Body {
+        path,
+        src: match encoding {
+            Encoding::Ascii => Src::Ascii {
+                lines,
+                buf: Vec::with_capacity(256),
+                pos: 0,
+                line: 0,
+            },
+            Encoding::BinaryLittleEndian => Src::Binary {
+                r: lines.into_inner(),
+                be: false,
+            },
+            Encoding::BinaryBigEndian => Src::Binary {
+                r: lines.into_inner(),
+                be: true,
+            },
+        },
+        element: String::new(),
+        index: 0,
+    };
+    let mut polygons = 0u64;
+    for (k, el) in elements.iter().enumerate() {
+        body.element.clear();
+        body.element.push_str(&el.name);
+        if k == vi {
+            read_vertices(&mut body, el, &roles, &mut raw)?;
+        } else if k == fi {
+            polygons = read_faces(&mut body, el, index_prop, vel.count, &mut raw)?;
+        } else {
+            for i in 0..el.count {
+                body.begin(i, el.count)?;
+                for p in &el.props {
+                    body.skip(p.kind)?;
+                }
+                body.end()?;
+            }
+            if el.count > 0 {
+                notes.push(format!("skipped {} PLY '{}' elements", el.count, el.name));
+            }
+        }
+    }
+    if body.has_trailing_data()? {
+        notes.push("ignored data after the last PLY element".into());
+    }
+    if polygons > 0 {
+        notes.push(format!(
+            "fanned {polygons} PLY polygons with more than 3 vertices into triangles"
+        ));
+    }
+    raw.notes = notes;
+    Ok(raw)
+}
+
+fn read_header<R: BufRead>(
+    path: &Path,
+    lines: &mut Lines<R>,
+) -> Result<(Encoding, Vec<Element>), IoError> {
+    let mut encoding = None;
+    let mut elements: Vec<Element> = Vec::new();
+    let mut first = true;
+    loop {
+        let (ln, line) = match lines
+            .next_line(MAX_HEADER_LINE)
+            .map_err(|e| io_error(path, e))?
+        {
+            Next::Line(ln, l) => (ln, l),
+            Next::Eof => return Err(malformed(path, None, "the PLY header has no 'end_header'")),
+            Next::TooLong(ln) => return Err(malformed(path, Some(ln), "PLY header line too long")),
+        };
+        let bad = |m: String| malformed(path, Some(ln), m);
+        if first {
+            if line.trim_ascii() != b"ply" {
+                return Err(bad("not a PLY file (the first line is not 'ply')".into()));
+            }
+            first = false;
+            continue;
+        }
+        if has_nul(line) {
+            return Err(bad("binary data (NUL byte) in the PLY header".into()));
+        }
+        let mut t = tokens(line);
+        let Some(kw) = t.next() else { continue };
+        match kw {
+            b"format" => {
+                encoding = Some(match t.next() {
+                    Some(b"ascii") => Encoding::Ascii,
+                    Some(b"binary_little_endian") => Encoding::BinaryLittleEndian,
+                    Some(b"binary_big_endian") => Encoding::BinaryBigEndian,
+                    other => {
+                        return Err(bad(format!(
+                            "unknown PLY format '{}'",
+                            show(other.unwrap_or(b""))
+                        )))
+                    }
+                });
+            }
+            b"comment" | b"obj_info" => {}
+            b"element" => {
+                let (Some(name), Some(count)) = (t.next(), t.next()) else {
+                    return Err(bad("an element line needs a name and a count".into()));
+                };
+                let count = parse_i64(count)
+                    .and_then(|c| u64::try_from(c).ok())
+                    .ok_or_else(|| bad(format!("bad element count '{}'", show(count))))?;
+                elements.push(Element {
+                    name: String::from_utf8_lossy(name).into_owned(),
+                    count,
+                    props: Vec::new(),
+                    line: ln,
+                });
+            }
+            b"property" => {
+                let el = elements
+                    .last_mut()
+                    .ok_or_else(|| bad("a property before any element".into()))?;
+                let ty = |s: Option<&[u8]>| {
+                    let s = s.unwrap_or(b"");
+                    Scalar::parse(s)
+                        .ok_or_else(|| bad(format!("unknown property type '{}'", show(s))))
+                };
+                let head = t.next();
+                let kind = if head == Some(b"list") {
+                    let c = ty(t.next())?;
+                    if !c.is_int() {
+                        return Err(bad("a list count must have an integer type".into()));
+                    }
+                    Kind::List(c, ty(t.next())?)
+                } else {
+                    Kind::Scalar(ty(head)?)
+                };
+                let name = t
+                    .next()
+                    .ok_or_else(|| bad("a property needs a name".into()))?;
+                el.props.push(Prop {
+                    name: String::from_utf8_lossy(name).into_owned(),
+                    kind,
+                });
+            }
+            b"end_header" => break,
+            other => {
+                return Err(bad(format!("unknown PLY header line '{}'", show(other))));
+            }
+        }
+    }
+    let encoding =
+        encoding.ok_or_else(|| malformed(path, None, "the PLY header has no 'format' line"))?;
+    Ok((encoding, elements))
+}
+
+/// Where element values come from.
+enum Src<R> {
+    Ascii {
+        lines: Lines<R>,
+        /// The current element's line.
+        buf: Vec<u8>,
+        /// Cursor in `buf`.
+        pos: usize,
+        line: usize,
+    },
+    Binary {
+        r: R,
+        be: bool,
+    },
+}
+
+/// Reads element values with error context (element name and index, line).
+struct Body<'p, R> {
+    path: &'p Path,
+    src: Src<R>,
+    element: String,
+    index: u64,
+}
+
+macro_rules! rd {
+    ($r:expr, $t:ty, $be:expr) => {{
+        let mut b = [0u8; std::mem::size_of::<$t>()];
+        $r.read_exact(&mut b)?;
+        if $be {
+            <$t>::from_be_bytes(b)
+        } else {
+            <$t>::from_le_bytes(b)
+        }
+    }};
+}
+
+fn read_binary<R: Read>(r: &mut R, t: Scalar, be: bool) -> std::io::Result<f64> {
+    Ok(match t {
+        Scalar::I8 => f64::from(rd!(r, i8, be)),
+        Scalar::U8 => f64::from(rd!(r, u8, be)),
+        Scalar::I16 => f64::from(rd!(r, i16, be)),
+        Scalar::U16 => f64::from(rd!(r, u16, be)),
+        Scalar::I32 => f64::from(rd!(r, i32, be)),
+        Scalar::U32 => f64::from(rd!(r, u32, be)),
+        Scalar::F32 => f64::from(rd!(r, f32, be)),
+        Scalar::F64 => rd!(r, f64, be),
+    })
+}
+
+impl<R: BufRead> Body<'_, R> {
+    fn err(&self, m: impl std::fmt::Display) -> IoError {
+        match &self.src {
+            Src::Ascii { line, .. } => malformed(self.path, Some(*line), m.to_string()),
+            Src::Binary { .. } => malformed(
+                self.path,
+                None,
+                format!("'{}' element {}: {m}", self.element, self.index),
+            ),
+        }
+    }
+
+    fn bin_err(&self, e: std::io::Error) -> IoError {
+        read_error(
+            self.path,
+            e,
+            &format!("'{}' element {}", self.element, self.index),
+        )
+    }
+
+    /// Starts element instance `i` of `count` (ASCII: reads its line).
+    fn begin(&mut self, i: u64, count: u64) -> Result<(), IoError> {
+        self.index = i;
+        if let Src::Ascii {
+            lines,
+            buf,
+            pos,
+            line,
+        } = &mut self.src
+        {
+            loop {
+                match lines
+                    .next_line(MAX_LINE)
+                    .map_err(|e| io_error(self.path, e))?
+                {
+                    Next::Line(ln, l) => {
+                        if l.trim_ascii().is_empty() {
+                            continue;
+                        }
+                        if has_nul(l) {
+                            return Err(malformed(
+                                self.path,
+                                Some(ln),
+                                "binary data (NUL byte) in an ASCII PLY body",
+                            ));
+                        }
+                        buf.clear();
+                        buf.extend_from_slice(l);
+                        *pos = 0;
+                        *line = ln;
+                        return Ok(());
+                    }
+                    Next::Eof | Next::TooLong(_) => {
+                        return Err(malformed(
+                            self.path,
+                            None,
+                            format!(
+                                "truncated file: it ends after {i} of {count} '{}' elements",
+                                self.element
+                            ),
+                        ))
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Ends an element instance (ASCII: no values may be left on the line).
+    fn end(&mut self) -> Result<(), IoError> {
+        if let Src::Ascii { buf, pos, .. } = &self.src {
+            if tokens(buf.get(*pos..).unwrap_or(b"")).next().is_some() {
+                return Err(self.err(format!(
+                    "more values on the line than the '{}' element declares",
+                    self.element
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// The next ASCII token as a byte range of `buf`.
+    fn token(&mut self) -> Result<std::ops::Range<usize>, IoError> {
+        if let Src::Ascii { buf, pos, .. } = &mut self.src {
+            let mut s = *pos;
+            while buf.get(s).is_some_and(|b| b.is_ascii_whitespace()) {
+                s += 1;
+            }
+            let mut e = s;
+            while buf.get(e).is_some_and(|b| !b.is_ascii_whitespace()) {
+                e += 1;
+            }
+            *pos = e;
+            if e > s {
+                return Ok(s..e);
+            }
+        }
+        Err(self.err(format!(
+            "fewer values on the line than the '{}' element declares",
+            self.element
+        )))
+    }
+
+    fn tok_bytes(&self, r: std::ops::Range<usize>) -> &[u8] {
+        match &self.src {
+            Src::Ascii { buf, .. } => buf.get(r).unwrap_or(b""),
+            Src::Binary { .. } => b"",
+        }
+    }
+
+    /// A binary value (None for ASCII sources).
+    fn bin(&mut self, t: Scalar) -> Option<std::io::Result<f64>> {
+        match &mut self.src {
+            Src::Binary { r, be } => {
+                let be = *be;
+                Some(read_binary(r, t, be))
+            }
+            Src::Ascii { .. } => None,
+        }
+    }
+
+    /// A coordinate (finite).
+    fn coord(&mut self, t: Scalar) -> Result<f64, IoError> {
+        let v = match self.bin(t) {
+            Some(res) => res.map_err(|e| self.bin_err(e))?,
+            None => {
+                // A value declared `float` is an f32: rounded once from the text.
+                let r = self.token()?;
+                let tok = self.tok_bytes(r);
+                let v = if t == Scalar::F32 {
+                    parse_coord_f32(tok)
+                } else {
+                    parse_coord(tok)
+                };
+                return v.map_err(|m| self.err(m));
+            }
+        };
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(self.err("non-finite coordinate (NaN and infinity are not allowed)"))
+        }
+    }
+
+    /// Any finite number (colours).
+    fn number(&mut self, t: Scalar) -> Result<f64, IoError> {
+        let v = match self.bin(t) {
+            Some(res) => res.map_err(|e| self.bin_err(e))?,
+            None => {
+                let r = self.token()?;
+                let tok = self.tok_bytes(r);
+                parse_f64(tok)
+                    .ok_or_else(|| self.err(format!("'{}' is not a number", show(tok))))?
+            }
+        };
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(self.err("non-finite value"))
+        }
+    }
+
+    /// An integer (list counts, indices).
+    fn int(&mut self, t: Scalar) -> Result<i64, IoError> {
+        match self.bin(t) {
+            // Integer types only (checked in the header): exact in f64.
+            Some(res) => Ok(res.map_err(|e| self.bin_err(e))? as i64),
+            None => {
+                let r = self.token()?;
+                let tok = self.tok_bytes(r);
+                parse_i64(tok).ok_or_else(|| self.err(format!("'{}' is not an integer", show(tok))))
+            }
+        }
+    }
+
+    /// A list's length.
+    fn count(&mut self, c: Scalar) -> Result<u64, IoError> {
+        let n = self.int(c)?;
+        u64::try_from(n).map_err(|_| self.err(format!("negative list length {n}")))
+    }
+
+    /// Skips one property.
+    fn skip(&mut self, kind: Kind) -> Result<(), IoError> {
+        match kind {
+            Kind::Scalar(t) => self.skip_values(t, 1),
+            Kind::List(c, t) => {
+                let n = self.count(c)?;
+                self.skip_values(t, n)
+            }
+        }
+    }
+
+    fn skip_values(&mut self, t: Scalar, n: u64) -> Result<(), IoError> {
+        let bytes = n.saturating_mul(t.size());
+        let copied = match &mut self.src {
+            Src::Binary { r, .. } => {
+                std::io::copy(&mut r.by_ref().take(bytes), &mut std::io::sink())
+            }
+            Src::Ascii { .. } => {
+                for _ in 0..n {
+                    self.token()?;
+                }
+                return Ok(());
+            }
+        };
+        match copied {
+            Ok(c) if c == bytes => Ok(()),
+            Ok(_) => Err(self.bin_err(std::io::ErrorKind::UnexpectedEof.into())),
+            Err(e) => Err(self.bin_err(e)),
+        }
+    }
+
+    fn has_trailing_data(&mut self) -> Result<bool, IoError> {
+        match &mut self.src {
+            Src::Binary { r, .. } => {
+                Ok(!r.fill_buf().map_err(|e| io_error(self.path, e))?.is_empty())
+            }
+            Src::Ascii { lines, .. } => loop {
+                match lines
+                    .next_line(MAX_LINE)
+                    .map_err(|e| io_error(self.path, e))?
+                {
+                    Next::Line(_, l) if l.trim_ascii().is_empty() => continue,
+                    Next::Eof => return Ok(false),
+                    _ => return Ok(true),
+                }
+            },
+        }
+    }
+}
+
+/// A colour value of type `t` as a component in `[0, 1]`.
+fn color_value(v: f64, t: Scalar) -> f32 {
+    let c = match t {
+        Scalar::U16 => v / 65535.0,
+        Scalar::F32 | Scalar::F64 => v,
+        _ => v / 255.0,
+    };
+    c as f32
+}
+
+fn read_vertices<R: BufRead>(
+    body: &mut Body<'_, R>,
+    el: &Element,
+    roles: &[Role],
+    raw: &mut RawMesh,
+) -> Result<(), IoError> {
+    for i in 0..el.count {
+        body.begin(i, el.count)?;
+        let mut p = DVec3::ZERO;
+        let mut c = [0.0f32; 3];
+        for (prop, &role) in el.props.iter().zip(roles) {
+            match (role, prop.kind) {
+                (Role::X, Kind::Scalar(t)) => p.x = body.coord(t)?,
+                (Role::Y, Kind::Scalar(t)) => p.y = body.coord(t)?,
+                (Role::Z, Kind::Scalar(t)) => p.z = body.coord(t)?,
+                (Role::R, Kind::Scalar(t)) => c[0] = color_value(body.number(t)?, t),
+                (Role::G, Kind::Scalar(t)) => c[1] = color_value(body.number(t)?, t),
+                (Role::B, Kind::Scalar(t)) => c[2] = color_value(body.number(t)?, t),
+                (_, kind) => body.skip(kind)?,
+            }
+        }
+        body.end()?;
+        raw.positions.push(p);
+        if let Some(cs) = raw.colors.as_mut() {
+            cs.push(c);
+        }
+    }
+    Ok(())
+}
+
+/// Reads the faces; returns the number of polygons fanned.
+fn read_faces<R: BufRead>(
+    body: &mut Body<'_, R>,
+    el: &Element,
+    index_prop: Option<usize>,
+    num_vertices: u64,
+    raw: &mut RawMesh,
+) -> Result<u64, IoError> {
+    let mut polygons = 0;
+    for i in 0..el.count {
+        body.begin(i, el.count)?;
+        for (k, prop) in el.props.iter().enumerate() {
+            match prop.kind {
+                Kind::List(c, t) if Some(k) == index_prop => {
+                    let n = body.count(c)?;
+                    if n < 3 {
+                        return Err(
+                            body.err(format!("a face needs at least 3 vertices, found {n}"))
+                        );
+                    }
+                    if n > 3 {
+                        polygons += 1;
+                    }
+                    let (mut first, mut prev) = (0u32, 0u32);
+                    for j in 0..n {
+                        let v = body.int(t)?;
+                        let v = u32::try_from(v)
+                            .ok()
+                            .filter(|&v| u64::from(v) < num_vertices)
+                            .ok_or_else(|| {
+                                body.err(format!(
+                                    "vertex index {v} out of range ({num_vertices} vertices)"
+                                ))
+                            })?;
+                        match j {
+                            0 => first = v,
+                            1 => prev = v,
+                            _ => {
+                                if raw.faces.len() as u64 >= MAX_ELEMENTS {
+                                    return Err(
+                                        body.err(format!("more than {MAX_ELEMENTS} triangles"))
+                                    );
+                                }
+                                raw.faces.push([first, prev, v]);
+                                prev = v;
+                            }
+                        }
+                    }
+                }
+                kind => body.skip(kind)?,
+            }
+        }
+        body.end()?;
+    }
+    Ok(polygons)
+}
+
+/// Writes a PLY file in `raw.encoding`: `float` coordinates when the precision is
+/// `F32`, else `double`; `uchar` colours; `uchar`/`int` index lists.
+pub(crate) fn write<W: Write>(w: &mut W, raw: &RawMesh) -> std::io::Result<()> {
+    let f32 = raw.precision == Precision::F32;
+    let colors = raw.colors.as_deref();
+    let index_type = if raw.positions.len() > i32::MAX as usize {
+        "uint"
+    } else {
+        "int"
+    };
+    let format = match raw.encoding {
+        Encoding::Ascii => "ascii",
+        Encoding::BinaryLittleEndian => "binary_little_endian",
+        Encoding::BinaryBigEndian => "binary_big_endian",
+    };
+    let real = if f32 { "float" } else { "double" };
+    write!(
+        w,
+        "ply\nformat {format} 1.0\ncomment written by holefill\nelement vertex {}\n\
+         property {real} x\nproperty {real} y\nproperty {real} z\n",
+        raw.positions.len()
+    )?;
+    if colors.is_some() {
+        w.write_all(b"property uchar red\nproperty uchar green\nproperty uchar blue\n")?;
+    }
+    write!(
+        w,
+        "element face {}\nproperty list uchar {index_type} vertex_indices\nend_header\n",
+        raw.faces.len()
+    )?;
+    match raw.encoding {
+        Encoding::Ascii => {
+            for (i, p) in raw.positions.iter().enumerate() {
+                super::write_real(w, p.x, f32)?;
+                w.write_all(b" ")?;
+                super::write_real(w, p.y, f32)?;
+                w.write_all(b" ")?;
+                super::write_real(w, p.z, f32)?;
+                if let Some(c) = colors.and_then(|c| c.get(i)) {
+                    write!(
+                        w,
+                        " {} {} {}",
+                        color_byte(c[0]),
+                        color_byte(c[1]),
+                        color_byte(c[2])
+                    )?;
+                }
+                w.write_all(b"\n")?;
+            }
+            for f in &raw.faces {
+                writeln!(w, "3 {} {} {}", f[0], f[1], f[2])?;
+            }
+        }
+        Encoding::BinaryLittleEndian | Encoding::BinaryBigEndian => {
+            let be = raw.encoding == Encoding::BinaryBigEndian;
+            let mut rec: Vec<u8> = Vec::with_capacity(27);
+            for (i, p) in raw.positions.iter().enumerate() {
+                rec.clear();
+                for v in [p.x, p.y, p.z] {
+                    match (f32, be) {
+                        (true, false) => rec.extend_from_slice(&(v as f32).to_le_bytes()),
+                        (true, true) => rec.extend_from_slice(&(v as f32).to_be_bytes()),
+                        (false, false) => rec.extend_from_slice(&v.to_le_bytes()),
+                        (false, true) => rec.extend_from_slice(&v.to_be_bytes()),
+                    }
+                }
+                if let Some(c) = colors.and_then(|c| c.get(i)) {
+                    rec.extend(c.iter().map(|&c| color_byte(c)));
+                }
+                w.write_all(&rec)?;
+            }
+            for f in &raw.faces {
+                rec.clear();
+                rec.push(3);
+                for i in f {
+                    if be {
+                        rec.extend_from_slice(&i.to_be_bytes());
+                    } else {
+                        rec.extend_from_slice(&i.to_le_bytes());
+                    }
+                }
+                w.write_all(&rec)?;
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,402 @@
+//! STL, binary and ASCII.
+//!
+//! Detection: binary when the file size is exactly `84 + 50 n` for the triangle
+//! count `n` in bytes 80..84; otherwise ASCII when it starts with `solid` and parses.
+//! STL stores every triangle corner separately, so corners are welded into vertices
+//! by exact position: the key is the bit pattern of each coordinate (as read: the
+//! `f32` widened to `f64` for binary, the parsed `f64` for ASCII), with `-0.0`
+//! treated as `+0.0`. Vertices are numbered in order of first appearance. Binary
+//! files read as precision `F32`; ASCII as `F64` (decimal text parsed exactly).
+//! Facet normals and the attribute bytes are ignored on reading and recomputed on
+//! writing.
+
+use super::text::{has_nul, parse_coord, show, strip_comment, tokens, Lines, Next, MAX_LINE};
+use super::MAX_ELEMENTS;
+use super::{io_error, malformed, read_error, Encoding, FastBuild, IoError, Precision, RawMesh};
+use glam::DVec3;
+use std::collections::HashMap;
+use std::io::{BufRead, Read, Write};
+use std::path::Path;
+
+/// Welds corners into vertices by exact position.
+struct Welder {
+    map: HashMap<[u64; 3], u32, FastBuild>,
+    corners: u64,
+}
+
+impl Welder {
+    fn new(capacity: usize) -> Self {
+        Welder {
+            map: HashMap::with_capacity_and_hasher(capacity, FastBuild::default()),
+            corners: 0,
+        }
+    }
+
+    /// The vertex at `p` (a new one when no earlier corner had exactly this position).
+    fn vertex(&mut self, p: DVec3, positions: &mut Vec<DVec3>) -> Option<u32> {
+        self.corners += 1;
+        // `+ 0.0` turns -0.0 into +0.0 and leaves every other value unchanged.
+        let key = [
+            (p.x + 0.0).to_bits(),
+            (p.y + 0.0).to_bits(),
+            (p.z + 0.0).to_bits(),
+        ];
+        let next = positions.len();
+        match self.map.entry(key) {
+            std::collections::hash_map::Entry::Occupied(e) => Some(*e.get()),
+            std::collections::hash_map::Entry::Vacant(e) => {
+                if next as u64 >= MAX_ELEMENTS {
+                    return None;
+                }
+                positions.push(p);
+                Some(*e.insert(next as u32))
+            }
+        }
+    }
+
+    fn note(&self, raw: &mut RawMesh) {
+        let welded = self.corners.saturating_sub(raw.positions.len() as u64);
+        raw.notes.push(format!(
+            "welded {} STL triangle corners into {} vertices by exact position ({welded} merged)",
+            self.corners,
+            raw.positions.len()
+        ));
+    }
+}
+
+/// True when the first bytes are ASCII STL text: no NUL byte, and the line after
+/// `solid name` starts with `facet` or `endsolid`. Used when an ASCII file happens
+/// to have the size of a binary one (binary headers often start with "solid" too).
+fn text_facets_follow(head: &[u8]) -> bool {
+    if head.contains(&0) {
+        return false;
+    }
+    let Some(nl) = head.iter().position(|&b| b == b'\n') else {
+        return false;
+    };
+    let rest = head.get(nl + 1..).unwrap_or(b"").trim_ascii_start();
+    let starts = |w: &[u8]| {
+        rest.get(..w.len())
+            .is_some_and(|s| s.eq_ignore_ascii_case(w))
+    };
+    starts(b"facet") || starts(b"endsolid")
+}
+
+/// Reads an STL file of `len` bytes.
+pub(crate) fn read<R: BufRead>(path: &Path, mut reader: R, len: u64) -> Result<RawMesh, IoError> {
+    let mut head = Vec::with_capacity(84);
+    (&mut reader)
+        .take(84)
+        .read_to_end(&mut head)
+        .map_err(|e| io_error(path, e))?;
+    let count = match head.get(80..84) {
+        Some(&[a, b, c, d]) => Some(u32::from_le_bytes([a, b, c, d])),
+        _ => None,
+    };
+    let is_solid = head
+        .trim_ascii_start()
+        .get(..5)
+        .is_some_and(|s| s.eq_ignore_ascii_case(b"solid"));
+    if let Some(n) = count {
+        if 84 + 50 * u64::from(n) == len && !(is_solid && text_facets_follow(&head)) {
+            return read_binary(path, reader, n);
+        }
+    }
+    if is_solid {
+        let chained = std::io::Read::chain(head.as_slice(), reader);
+        return read_ascii(path, chained).map_err(|e| match (e, count) {
+            (
+                IoError::Malformed {
+                    path,
+                    line,
+                    message,
+                },
+                Some(n),
+            ) => IoError::Malformed {
+                path,
+                line,
+                message: format!(
+                    "{message} (read as ASCII STL; as binary STL its count of {n} triangles \
+                     would need {} bytes, the file has {len})",
+                    84 + 50 * u64::from(n)
+                ),
+            },
+            (e, _) => e,
+        });
+    }
+    match count {
+        Some(n) => Err(malformed(
+            path,
+            None,
+            format!(
+                "binary STL header says {n} triangles, which needs 84 + 50 × {n} = {} bytes, \
+                 but the file has {len} bytes",
+                84 + 50 * u64::from(n)
+            ),
+        )),
+        None => Err(malformed(
+            path,
+            None,
+            format!("not an STL file: {len} bytes is too short for binary STL and it does not start with 'solid'"),
+        )),
+    }
+}
+
+fn read_binary<R: Read>(path: &Path, mut reader: R, n: u32) -> Result<RawMesh, IoError> {
+    let mut raw = RawMesh {
+        precision: Precision::F32,
+        encoding: Encoding::BinaryLittleEndian,
+        ..RawMesh::default()
+    };
+    // The count was checked against the file size: these reservations are backed
+    // by data (a closed surface has about half as many vertices as triangles).
+    raw.faces.reserve(n as usize);
+    raw.positions.reserve(n as usize / 2 + 3);
+    let mut welder = Welder::new(n as usize / 2 + 3);
+    let mut rec = [0u8; 50];
+    let f = |rec: &[u8; 50], o: usize| -> f64 {
+        match rec.get(o..o + 4) {
+            Some(&[a, b, c, d]) => f64::from(f32::from_le_bytes([a, b, c, d])),
+            _ => f64::NAN,
+        }
+    };
+    for t in 0..n {
+        reader
+            .read_exact(&mut rec)
+            .map_err(|e| read_error(path, e, &format!("triangle {t}")))?;
+        let mut face = [0u32; 3];
+        for (k, slot) in face.iter_mut().enumerate() {
+            let o = 12 + 12 * k;
+            let p = DVec3::new(f(&rec, o), f(&rec, o + 4), f(&rec, o + 8));
+            if !p.is_finite() {
+                return Err(malformed(
+                    path,
+                    None,
+                    format!("triangle {t}: non-finite coordinate {p} (NaN and infinity are not allowed)"),
+                ));
+            }
+            *slot = welder.vertex(p, &mut raw.positions).ok_or_else(|| {
+                malformed(path, None, format!("more than {MAX_ELEMENTS} vertices"))
+            })?;
+        }
+        raw.faces.push(face);
+    }
+    welder.note(&mut raw);
+    Ok(raw)
+}
+
+fn read_ascii<R: BufRead>(path: &Path, reader: R) -> Result<RawMesh, IoError> {
+    let mut raw = RawMesh {
+        precision: Precision::F64,
+        encoding: Encoding::Ascii,
+        ..RawMesh::default()
+    };
+    let mut lines = Lines::new(reader);
+    let mut welder = Welder::new(1024);
+    let mut in_facet = false;
+    let mut in_loop = false;
+    let mut corners: Vec<u32> = Vec::with_capacity(4);
+    let mut polygons = 0u64;
+    loop {
+        let (ln, line) = match lines.next_line(MAX_LINE).map_err(|e| io_error(path, e))? {
+            Next::Line(ln, l) => (ln, l),
+            Next::Eof => break,
+            Next::TooLong(ln) => return Err(malformed(path, Some(ln), "line too long")),
+        };
+        let bad = |m: String| malformed(path, Some(ln), m);
+        if has_nul(line) {
+            return Err(bad("binary data (NUL byte) in an ASCII STL file".into()));
+        }
+        let mut t = tokens(strip_comment(line));
+        let Some(kw) = t.next() else { continue };
+        let is = |s: &[u8]| kw.eq_ignore_ascii_case(s);
+        if is(b"solid") {
+            if in_facet {
+                return Err(bad("'solid' inside a facet".into()));
+            }
+        } else if is(b"facet") {
+            if in_facet {
+                return Err(bad("'facet' inside a facet (missing 'endfacet')".into()));
+            }
+            in_facet = true;
+            corners.clear();
+        } else if is(b"outer") {
+            if !in_facet || in_loop {
+                return Err(bad("'outer loop' outside a facet".into()));
+            }
+            in_loop = true;
+        } else if is(b"vertex") {
+            if !in_loop {
+                return Err(bad("'vertex' outside 'outer loop'".into()));
+            }
+            let mut c = [0.0f64; 3];
+            let mut n = 0;
+            for tok in t {
+                let slot = c
+                    .get_mut(n)
+                    .ok_or_else(|| bad("a vertex needs exactly 3 coordinates".into()))?;
+                *slot = parse_coord(tok).map_err(&bad)?;
+                n += 1;
+            }
+            if n != 3 {
+                return Err(bad(format!(
+                    "a vertex needs exactly 3 coordinates, found {n}"
+                )));
+            }
+            let v = welder
+                .vertex(DVec3::from_array(c), &mut raw.positions)
+                .ok_or_else(|| bad(format!("more than {MAX_ELEMENTS} vertices")))?;
+            corners.push(v);
+        } else if is(b"endloop") {
+            if !in_loop {
+                return Err(bad("'endloop' without 'outer loop'".into()));
+            }
+            in_loop = false;
+        } else if is(b"endfacet") {
+            if !in_facet || in_loop {
+                return Err(bad("'endfacet' without a complete facet".into()));
+            }
+            in_facet = false;
+            let (&a, rest) = corners
+                .split_first()
+                .ok_or_else(|| bad("a facet needs at least 3 vertices, found 0".into()))?;
+            if rest.len() < 2 {
+                return Err(bad(format!(
+                    "a facet needs at least 3 vertices, found {}",
+                    corners.len()
+                )));
+            }
+            if rest.len() > 2 {
+                polygons += 1;
+            }
+            for w in rest.windows(2) {
+                if let [b, c] = *w {
+                    if raw.faces.len() as u64 >= MAX_ELEMENTS {
+                        return Err(bad(format!("more than {MAX_ELEMENTS} triangles")));
+                    }
+                    raw.faces.push([a, b, c]);
+                }
+            }
+        } else if is(b"endsolid") {
+            if in_facet {
+                return Err(bad("'endsolid' inside a facet".into()));
+            }
+        } else {
+            return Err(bad(format!("unexpected '{}' in ASCII STL", show(kw))));
+        }
+    }
+    if in_facet {
+        return Err(malformed(
+            path,
+            Some(lines.line()),
+            "truncated file: it ends inside a facet",
+        ));
+    }
+    welder.note(&mut raw);
+    if polygons > 0 {
+        raw.notes.push(format!(
+            "fanned {polygons} STL facets with more than 3 vertices into triangles"
+        ));
+    }
+    Ok(raw)
+}
+
+/// Unit normal of a triangle (zero when degenerate).
+fn normal(raw: &RawMesh, f: &[u32; 3]) -> DVec3 {
+    let p = |i: u32| {
+        raw.positions
+            .get(i as usize)
+            .copied()
+            .unwrap_or(DVec3::ZERO)
+    };
+    let (a, b, c) = (p(f[0]), p(f[1]), p(f[2]));
+    (b - a).cross(c - a).normalize_or_zero()
+}
+
+/// Writes binary STL when `raw.encoding` is binary (always little-endian `f32`),
+/// else ASCII STL. Normals are computed from the triangles.
+pub(crate) fn write<W: Write>(w: &mut W, raw: &RawMesh) -> std::io::Result<()> {
+    let pos = |i: u32| {
+        raw.positions
+            .get(i as usize)
+            .copied()
+            .unwrap_or(DVec3::ZERO)
+    };
+    if raw.encoding == Encoding::Ascii {
+        let f32 = raw.precision == Precision::F32;
+        w.write_all(b"solid holefill\n")?;
+        for f in &raw.faces {
+            let n = normal(raw, f).as_vec3();
+            writeln!(w, "facet normal {} {} {}\n  outer loop", n.x, n.y, n.z)?;
+            for &i in f {
+                let p = pos(i);
+                w.write_all(b"    vertex ")?;
+                super::write_real(w, p.x, f32)?;
+                w.write_all(b" ")?;
+                super::write_real(w, p.y, f32)?;
+                w.write_all(b" ")?;
+                super::write_real(w, p.z, f32)?;
+                w.write_all(b"\n")?;
+            }
+            w.write_all(b"  endloop\nendfacet\n")?;
+        }
+        w.write_all(b"endsolid holefill\n")?;
+    } else {
+        let mut header = [b' '; 80];
+        let text = b"binary STL written by holefill";
+        for (h, t) in header.iter_mut().zip(text) {
+            *h = *t;
+        }
+        w.write_all(&header)?;
+        let n = u32::try_from(raw.faces.len()).unwrap_or(u32::MAX);
+        w.write_all(&n.to_le_bytes())?;
+        let mut rec = [0u8; 50];
+        for f in &raw.faces {
+            let n = normal(raw, f).as_vec3();
+            let vals = [
+                n,
+                pos(f[0]).as_vec3(),
+                pos(f[1]).as_vec3(),
+                pos(f[2]).as_vec3(),
+            ];
+            for (chunk, v) in rec
+                .chunks_exact_mut(4)
+                .zip(vals.iter().flat_map(|v| v.to_array()))
+            {
+                chunk.copy_from_slice(&v.to_le_bytes());
+            }
+            w.write_all(&rec)?;
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ascii_text_is_recognised_in_the_first_bytes() {
+        assert!(text_facets_follow(b"solid cube\n  facet normal 0 0 1\n"));
+        assert!(text_facets_follow(b"solid\r\nendsolid\r\n"));
+        let mut binary = b"solid exported by some tool".to_vec();
+        binary.resize(84, 0);
+        assert!(!text_facets_follow(&binary));
+        assert!(!text_facets_follow(
+            b"solid name without newline in 84 bytes"
+        ));
+    }
+
+    #[test]
+    fn welder_merges_signed_zeros_only() {
+        let mut pos = Vec::new();
+        let mut w = Welder::new(4);
+        let a = w.vertex(DVec3::new(0.0, 1.0, 2.0), &mut pos);
+        let b = w.vertex(DVec3::new(-0.0, 1.0, 2.0), &mut pos);
+        let c = w.vertex(DVec3::new(f64::from(0.1f32), 1.0, 2.0), &mut pos);
+        let d = w.vertex(DVec3::new(0.1, 1.0, 2.0), &mut pos);
+        assert_eq!((a, b), (Some(0), Some(0)));
+        assert_eq!((c, d), (Some(1), Some(2)));
+        assert_eq!(pos.len(), 3);
+    }
+}

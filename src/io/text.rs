@@ -1,0 +1,160 @@
+//! Line and token helpers shared by the text readers (OBJ, ASCII PLY, ASCII STL, OFF).
+//!
+//! Lines are read into one reused buffer (no allocation per line); tokens are
+//! whitespace-separated byte slices of it.
+
+use std::io::{BufRead, Read};
+
+/// Longest data line accepted by the text readers (a polygon of millions of
+/// vertices still fits).
+pub(crate) const MAX_LINE: u64 = 64 << 20;
+
+/// A line reader over a buffered source that counts lines (1-based) and bytes.
+pub(crate) struct Lines<R> {
+    inner: R,
+    buf: Vec<u8>,
+    line: usize,
+    consumed: u64,
+}
+
+/// What [`Lines::next_line`] found.
+pub(crate) enum Next<'a> {
+    /// A line (without its `\n` / `\r\n`) and its 1-based number.
+    Line(usize, &'a [u8]),
+    /// The end of the file.
+    Eof,
+    /// A line longer than the allowed maximum (its number).
+    TooLong(usize),
+}
+
+impl<R: BufRead> Lines<R> {
+    pub(crate) fn new(inner: R) -> Self {
+        Lines {
+            inner,
+            buf: Vec::with_capacity(256),
+            line: 0,
+            consumed: 0,
+        }
+    }
+
+    /// The number of the last line returned (0 before the first).
+    pub(crate) fn line(&self) -> usize {
+        self.line
+    }
+
+    /// Bytes consumed so far (including line terminators).
+    pub(crate) fn consumed(&self) -> u64 {
+        self.consumed
+    }
+
+    /// The underlying reader, positioned just after the last line returned.
+    pub(crate) fn into_inner(self) -> R {
+        self.inner
+    }
+
+    /// The last line read (without its terminator) and its number.
+    pub(crate) fn current(&self) -> Option<(usize, &[u8])> {
+        if self.line == 0 {
+            return None;
+        }
+        let mut s: &[u8] = &self.buf;
+        if let Some(t) = s.strip_suffix(b"\n") {
+            s = t;
+        }
+        if let Some(t) = s.strip_suffix(b"\r") {
+            s = t;
+        }
+        Some((self.line, s))
+    }
+
+    /// The next line, reading at most `max` bytes for it (so that junk without
+    /// newlines cannot make the reader buffer a whole file).
+    pub(crate) fn next_line(&mut self, max: u64) -> std::io::Result<Next<'_>> {
+        self.buf.clear();
+        let n = (&mut self.inner)
+            .take(max.saturating_add(1))
+            .read_until(b'\n', &mut self.buf)?;
+        if n == 0 {
+            return Ok(Next::Eof);
+        }
+        self.consumed += n as u64;
+        self.line += 1;
+        if n as u64 > max && self.buf.last() != Some(&b'\n') {
+            return Ok(Next::TooLong(self.line));
+        }
+        let mut s: &[u8] = &self.buf;
+        if let Some(t) = s.strip_suffix(b"\n") {
+            s = t;
+        }
+        if let Some(t) = s.strip_suffix(b"\r") {
+            s = t;
+        }
+        Ok(Next::Line(self.line, s))
+    }
+}
+
+/// The line up to (not including) the first `#`.
+pub(crate) fn strip_comment(line: &[u8]) -> &[u8] {
+    match line.iter().position(|&b| b == b'#') {
+        Some(i) => line.get(..i).unwrap_or(line),
+        None => line,
+    }
+}
+
+/// Whitespace-separated tokens of a line.
+pub(crate) fn tokens(line: &[u8]) -> impl Iterator<Item = &[u8]> {
+    line.split(|b| b.is_ascii_whitespace())
+        .filter(|t| !t.is_empty())
+}
+
+/// True when the line holds a NUL byte (binary data in a text file).
+pub(crate) fn has_nul(line: &[u8]) -> bool {
+    line.contains(&0)
+}
+
+/// A token as text for error messages (lossy, shortened).
+pub(crate) fn show(tok: &[u8]) -> String {
+    let s = String::from_utf8_lossy(tok);
+    if s.chars().count() > 40 {
+        let mut t: String = s.chars().take(40).collect();
+        t.push('…');
+        t
+    } else {
+        s.into_owned()
+    }
+}
+
+/// Parses a decimal real number (any value, including non-finite ones).
+pub(crate) fn parse_f64(tok: &[u8]) -> Option<f64> {
+    std::str::from_utf8(tok).ok()?.parse::<f64>().ok()
+}
+
+/// Parses a decimal integer.
+pub(crate) fn parse_i64(tok: &[u8]) -> Option<i64> {
+    std::str::from_utf8(tok).ok()?.parse::<i64>().ok()
+}
+
+/// Parses a finite coordinate, or says what is wrong with the token.
+pub(crate) fn parse_coord(tok: &[u8]) -> Result<f64, String> {
+    check_coord(tok, parse_f64(tok))
+}
+
+/// Parses a finite coordinate declared as a 32-bit float (rounded once, from the
+/// decimal text to `f32`, then widened exactly).
+pub(crate) fn parse_coord_f32(tok: &[u8]) -> Result<f64, String> {
+    let v = std::str::from_utf8(tok)
+        .ok()
+        .and_then(|s| s.parse::<f32>().ok());
+    check_coord(tok, v.map(f64::from))
+}
+
+fn check_coord(tok: &[u8], v: Option<f64>) -> Result<f64, String> {
+    match v {
+        Some(v) if v.is_finite() => Ok(v),
+        Some(_) => Err(format!(
+            "non-finite coordinate '{}' (NaN and infinity are not allowed)",
+            show(tok)
+        )),
+        None => Err(format!("'{}' is not a number", show(tok))),
+    }
+}
