@@ -1,0 +1,144 @@
+//! Isolation and recovery: a daemon killed with SIGKILL mid-repair, a file that kills
+//! its worker every time, a file that hangs its worker past the time limit.
+
+mod daemon_support;
+use daemon_support::*;
+use std::fs;
+use std::time::Duration;
+
+const LONG: Duration = Duration::from_secs(30);
+
+#[test]
+fn kill9_during_processing_then_restart_repairs_the_file_once() {
+    let f = Folders::new();
+    // every repair takes 3 s more (test hook), so the kill lands mid-repair
+    let mut d = Daemon::ready(&f, &[], &[("HOLEFILL_TEST_SLOW", ":3000")]);
+    let (obj, _) = mesh();
+    drop_renamed(&f.inbox, "k.obj", &obj);
+    assert!(
+        wait_until(LONG, || f.processing() == vec!["k.obj"]),
+        "claimed\n{}",
+        d.log()
+    );
+    std::thread::sleep(Duration::from_millis(300));
+    d.kill9();
+    assert_eq!(f.processing(), vec!["k.obj"], "in flight when killed");
+    assert!(f.models().is_empty());
+
+    let d2 = Daemon::ready(&f, &[], &[]);
+    assert!(
+        wait_until(LONG, || f.outbox.join("k.obj.repair.json").is_file()),
+        "{}",
+        d2.log()
+    );
+    // the orphaned worker of the dead daemon had 3 s to go: give it the time to (fail to) write
+    std::thread::sleep(Duration::from_secs(4));
+    assert_eq!(f.models(), vec!["k.obj"], "repaired once");
+    assert_eq!(
+        Folders::files(&f.outbox),
+        vec!["k.obj", "k.obj.repair.json"]
+    );
+    let log = Folders::log(&f.outbox, "k.obj");
+    assert_eq!(log["status"], "repaired");
+    assert_eq!(
+        log["daemon"]["attempt"], 2,
+        "the attempt that died counts: {log}"
+    );
+    assert_eq!(log["daemon"]["pid"].as_u64(), Some(d2.pid() as u64));
+    assert_eq!(Folders::files(&f.archive), vec!["k.obj"]);
+    assert!(f.processing().is_empty());
+    assert!(Folders::files(&f.inbox).is_empty());
+    assert!(d2.log().contains("recovered"), "{}", d2.log());
+    // the dead daemon's folders are gone
+    let left: Vec<_> = fs::read_dir(f.inbox.join(".processing"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name())
+        .collect();
+    assert_eq!(left.len(), 1, "only the live daemon's folder: {left:?}");
+}
+
+#[test]
+fn a_file_that_kills_its_worker_every_time_fails_after_max_attempts() {
+    let f = Folders::new();
+    // test hook: the worker of any file named *poison* kills itself with SIGKILL
+    let mut d = Daemon::ready(
+        &f,
+        &["--max-attempts", "3", "--workers", "1"],
+        &[("HOLEFILL_TEST_CRASH_ON", "poison")],
+    );
+    let (obj, _) = mesh();
+    drop_renamed(&f.inbox, "poison.obj", &obj);
+    assert!(
+        wait_until(LONG, || f.failed.join("poison.obj.repair.json").is_file()),
+        "{}",
+        d.log()
+    );
+    drop_renamed(&f.inbox, "next.obj", &obj);
+    assert!(
+        wait_until(LONG, || f.outbox.join("next.obj.repair.json").is_file()),
+        "{}",
+        d.log()
+    );
+    assert!(d.alive());
+    let log = Folders::log(&f.failed, "poison.obj");
+    assert_eq!(log["status"], "failed");
+    assert_eq!(log["stage"], "worker");
+    assert_eq!(log["daemon"]["attempt"], 3);
+    assert!(log["error"].as_str().unwrap().contains("signal 9"), "{log}");
+    assert_eq!(
+        fs::read_to_string(f.failed.join("poison.obj")).unwrap(),
+        obj,
+        "untouched"
+    );
+    assert_eq!(
+        d.log().matches("poison.obj: attempt").count(),
+        2,
+        "{}",
+        d.log()
+    );
+    assert_eq!(f.models(), vec!["next.obj"]);
+}
+
+#[test]
+fn a_file_that_hangs_its_worker_is_killed_at_the_time_limit() {
+    let f = Folders::new();
+    // test hook: the worker of *hang* files sleeps 60 s; the real time limit (1 s) kills it
+    let mut d = Daemon::ready(
+        &f,
+        &["--max-attempts", "2", "--time-limit-secs", "1"],
+        &[("HOLEFILL_TEST_SLOW", "hang:60000")],
+    );
+    let (obj, _) = mesh();
+    drop_renamed(&f.inbox, "hang.obj", &obj);
+    drop_renamed(&f.inbox, "fine.obj", &obj);
+    assert!(
+        wait_until(LONG, || f.failed.join("hang.obj.repair.json").is_file()),
+        "{}",
+        d.log()
+    );
+    assert!(
+        wait_until(LONG, || f.outbox.join("fine.obj.repair.json").is_file()),
+        "{}",
+        d.log()
+    );
+    assert!(d.alive());
+    let log = Folders::log(&f.failed, "hang.obj");
+    assert_eq!(log["stage"], "worker");
+    assert_eq!(log["daemon"]["attempt"], 2);
+    assert!(
+        log["error"].as_str().unwrap().contains("time limit"),
+        "{log}"
+    );
+    // the killed worker and its sleeping child are gone
+    let ps = std::process::Command::new("pgrep")
+        .args(["-f", "sleep 60.000"])
+        .output();
+    if let Ok(o) = ps {
+        assert!(
+            o.stdout.is_empty(),
+            "the worker's process group was killed: {}",
+            String::from_utf8_lossy(&o.stdout)
+        );
+    }
+}
