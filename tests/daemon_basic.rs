@@ -281,3 +281,24 @@ fn invalid_policy_at_start_is_refused() {
     assert_ne!(st.code(), Some(0));
     assert!(d.log().contains("invalid policy"), "{}", d.log());
 }
+
+#[test]
+fn poll_mode_finds_files_without_change_events() {
+    let f = Folders::new();
+    let d = Daemon::ready(&f, &["--poll", "--poll-ms", "200"], &[]);
+    assert!(d.log().contains("mode=\"poll\""), "{}", d.log());
+    let (obj, faces) = mesh();
+    drop_renamed(&f.inbox, "p1.obj", &obj);
+    write_slowly(&f.inbox.join("p2.obj"), &obj, 5, Duration::from_millis(800));
+    assert!(wait_until(LONG, || f.models().len() == 2), "{}", d.log());
+    for n in ["p1.obj", "p2.obj"] {
+        assert!(wait_until(LONG, || f
+            .outbox
+            .join(format!("{n}.repair.json"))
+            .is_file()));
+        assert_eq!(
+            Folders::log(&f.outbox, n)["before"]["faces"].as_u64(),
+            Some(faces as u64)
+        );
+    }
+}

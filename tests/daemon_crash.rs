@@ -142,3 +142,35 @@ fn a_file_that_hangs_its_worker_is_killed_at_the_time_limit() {
         );
     }
 }
+
+#[test]
+fn the_memory_limit_kills_a_runaway_worker_not_the_daemon() {
+    let f = Folders::new();
+    // a small mesh repairs in well under 24 MiB of address space; a 330k-face one needs
+    // several times 48 MiB
+    let mut d = Daemon::ready(&f, &["--memory-limit-mb", "48", "--max-attempts", "1"], &[]);
+    let (big, faces) = holed_sphere_obj(7, 0.05);
+    assert!(faces > 300_000);
+    drop_renamed(&f.inbox, "huge.obj", &big);
+    let (obj, _) = mesh();
+    drop_renamed(&f.inbox, "small.obj", &obj);
+    assert!(
+        wait_until(LONG, || f.failed.join("huge.obj.repair.json").is_file()),
+        "{}",
+        d.log()
+    );
+    assert!(
+        wait_until(LONG, || f.outbox.join("small.obj.repair.json").is_file()),
+        "{}",
+        d.log()
+    );
+    assert!(d.alive());
+    let log = Folders::log(&f.failed, "huge.obj");
+    assert_eq!(log["stage"], "worker", "{log}");
+    assert!(log["error"].as_str().unwrap().contains("memory"), "{log}");
+    assert_eq!(
+        fs::read_to_string(f.failed.join("huge.obj")).unwrap(),
+        big,
+        "untouched"
+    );
+}

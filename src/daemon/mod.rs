@@ -185,6 +185,7 @@ struct Daemon {
     done_tx: mpsc::UnboundedSender<Done>,
     done_rx: mpsc::UnboundedReceiver<Done>,
     events: Option<mpsc::Receiver<notify::Result<notify::Event>>>,
+    events_on: bool,
     _watcher: Option<notify::RecommendedWatcher>,
     rescan_flag: Arc<AtomicBool>,
     last_scan: Instant,
@@ -271,6 +272,7 @@ impl Daemon {
             cancel,
             done_tx,
             done_rx,
+            events_on: events.is_some(),
             events,
             _watcher: watcher,
             rescan_flag,
@@ -393,6 +395,7 @@ impl Daemon {
         }
         claim::clean_tmp(&self.layout, &self.id);
         self.pending.overflowed = false;
+        self.expect_create.clear();
         let now = Instant::now();
         match std::fs::read_dir(&self.layout.inbox) {
             Ok(rd) => {
@@ -511,6 +514,9 @@ impl Daemon {
         tokio::spawn(async move {
             let h = tokio::spawn(worker::process(ctx, job, cancel));
             let done = match h.await {
+                Ok(Done::Stranded { name: n, error }) if n.is_empty() => {
+                    Done::Stranded { name, error }
+                }
                 Ok(d) => d,
                 Err(e) => Done::Stranded {
                     name,
@@ -580,7 +586,9 @@ impl Daemon {
                 inbox_name,
                 error,
             } => {
-                self.expect_create.insert(inbox_name.clone());
+                if self.events_on {
+                    self.expect_create.insert(inbox_name.clone());
+                }
                 if self.stopping.is_some() {
                     tracing::info!(file = %name, "put back into the inbox as {inbox_name}");
                     return;

@@ -177,6 +177,17 @@ pub async fn process(ctx: Arc<RunCtx>, job: Job, mut cancel: watch::Receiver<boo
             }
         }
     }
+    // unreadable (permissions): permanent, and the worker would report it as a
+    // retryable I/O error
+    if let Err(e) = fs::File::open(&input) {
+        if e.kind() == io::ErrorKind::PermissionDenied {
+            let err = format!("cannot read the file: {e}");
+            return blocking(ctx.clone(), move |c| {
+                fail(&c, &job, started, t0, "input", err, None, None)
+            })
+            .await;
+        }
+    }
     if s.max_faces > 0 {
         let p = input.clone();
         let faces = tokio::task::spawn_blocking(move || sniff::declared_faces(&p))
@@ -275,6 +286,15 @@ pub async fn process(ctx: Arc<RunCtx>, job: Job, mut cancel: watch::Receiver<boo
                 ChildEnd::Signal(sig) if msg.contains("memory allocation") => format!(
                     "memory limit of {} MiB exceeded: worker died (signal {sig}): {msg}",
                     ctx.settings.memory_limit_mb
+                ),
+                ChildEnd::Signal(sig) if ctx.settings.memory_limit_mb > 0 && matches!(sig, 6 | 11) => format!(
+                    "worker killed by signal {sig} (an allocation past memory_limit_mb = {} MiB?){}",
+                    ctx.settings.memory_limit_mb,
+                    if msg.is_empty() {
+                        String::new()
+                    } else {
+                        format!(": {msg}")
+                    }
                 ),
                 ChildEnd::Signal(sig) => format!(
                     "worker killed by signal {sig}{}",
