@@ -174,3 +174,45 @@ fn the_memory_limit_kills_a_runaway_worker_not_the_daemon() {
         "untouched"
     );
 }
+
+#[test]
+fn a_file_whose_daemon_dies_every_time_goes_to_failed_after_max_attempts() {
+    let f = Folders::new();
+    let (obj, _) = mesh();
+    drop_renamed(&f.inbox, "deadly.obj", &obj);
+    for round in 1..=2 {
+        let mut d = Daemon::ready(
+            &f,
+            &["--max-attempts", "2"],
+            &[("HOLEFILL_TEST_SLOW", ":5000")],
+        );
+        assert!(
+            wait_until(LONG, || f.processing() == vec!["deadly.obj"]),
+            "round {round}: claimed\n{}",
+            d.log()
+        );
+        std::thread::sleep(Duration::from_millis(200));
+        d.kill9();
+    }
+    let d = Daemon::ready(&f, &["--max-attempts", "2"], &[]);
+    assert!(
+        wait_until(LONG, || f.failed.join("deadly.obj.repair.json").is_file()),
+        "{}",
+        d.log()
+    );
+    let log = Folders::log(&f.failed, "deadly.obj");
+    assert_eq!(log["status"], "failed");
+    assert_eq!(log["stage"], "worker");
+    assert_eq!(log["daemon"]["attempt"], 2, "{log}");
+    assert!(
+        log["error"].as_str().unwrap().contains("none finished"),
+        "{log}"
+    );
+    assert_eq!(
+        fs::read_to_string(f.failed.join("deadly.obj")).unwrap(),
+        obj,
+        "untouched"
+    );
+    assert!(f.models().is_empty());
+    assert!(f.processing().is_empty());
+}

@@ -147,6 +147,22 @@ pub async fn process(ctx: Arc<RunCtx>, job: Job, mut cancel: watch::Receiver<boo
     let started = SystemTime::now();
     let t0 = Instant::now();
     let input = ctx.layout.mine.join(&job.name);
+    // recovered from daemons that died while repairing it, max_attempts times
+    if job.attempt > ctx.settings.max_attempts {
+        let started_attempts = job.attempt - 1;
+        let err = format!(
+            "{started_attempts} attempts were started and none finished (the worker or the daemon died each time); max_attempts = {}",
+            ctx.settings.max_attempts
+        );
+        let job = Job {
+            attempt: started_attempts,
+            ..job
+        };
+        return blocking(ctx.clone(), move |c| {
+            fail(&c, &job, started, t0, "worker", err, None, None)
+        })
+        .await;
+    }
     let sidecar = Sidecar {
         attempts: job.attempt,
         received: job.received.clone(),
