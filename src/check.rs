@@ -2,6 +2,28 @@
 //! non-degenerate, the patch is a topological disk that closes the hole exactly (so
 //! the mesh stays edge-manifold and consistently oriented), and no new triangle
 //! intersects another triangle of the mesh or of the patch.
+//!
+//! Self-intersection: the broad phase is a bounding-volume hierarchy ([`crate::bvh`])
+//! over the mesh's faces built once in [`Checker::new`], plus a logarithmic set of
+//! small trees over the faces committed since and a linear scan of a short tail of
+//! them (see [`Checker`]); the narrow phase is an exact
+//! triangle-triangle test on `robust::orient3d`/`orient2d` signs ([`tri_tri`]).
+//!
+//! Readings where A5 is vague:
+//! - Triangles that share vertices follow CGAL's convention (as in
+//!   `Polygon_mesh_processing::self_intersections`): sharing one vertex they
+//!   intersect only if they meet somewhere else; sharing an edge only if they
+//!   overlap beyond it (a coplanar fold). Nothing else is excluded: a mesh face that
+//!   merely touches a patch triangle at a point that is not a shared vertex counts.
+//! - "Shared" is by identity, never by coordinates: a patch's loop vertex `i` is mesh
+//!   vertex `hole[i]`, new vertices are new. Copies of one input vertex made by the
+//!   mesh builder when it split a non-manifold vertex count as the same vertex while
+//!   they still sit at the same coordinates (else a hole at a pinch point could never
+//!   be filled: the other fan touches it there).
+//! - Patch triangles are tested against each other by the same rules.
+//! - The patch's own triangles are checked for degeneracy first, so the narrow phase
+//!   may assume them non-degenerate; a zero-area face of the mesh is handled exactly
+//!   (as the union of its edges).
 
 use crate::bvh::{boxes_meet, tri_box, Bvh};
 use crate::fill::geom;
@@ -24,23 +46,36 @@ pub enum CheckFailure {
 }
 
 /// Holds what the checks need across holes: a bounding-volume hierarchy over the
-/// mesh's faces at construction, and a second, smaller one over the faces committed
-/// since (rebuilt as it grows), with a short tail of faces scanned linearly.
+/// mesh's faces at construction, and for the faces committed since, a logarithmic
+/// set of smaller trees (Bentley-Saxe: a full tail of `TAIL` faces becomes a tree,
+/// and trees of similar size are merged), plus the short tail scanned linearly. A
+/// query costs O(log² n); each committed face is rebuilt into a tree O(log n) times.
 pub struct Checker {
     /// Tree over the faces the mesh had at construction.
     base: Bvh,
-    /// Faces indexed after construction, in the order they were committed.
-    committed: Vec<u32>,
-    /// Tree over `committed[..extra_len]`; the rest is scanned linearly.
-    extra: Bvh,
-    extra_len: usize,
-    /// First face index not yet in `base` or `committed`.
+    /// Trees over committed faces, sizes decreasing.
+    levels: Vec<Level>,
+    /// Committed faces not yet in a tree (fewer than `TAIL`).
+    tail: Vec<u32>,
+    /// First face index not yet in `base`, `levels` or `tail`.
     next_unseen: usize,
 }
 
-/// The linear tail of committed faces may grow to this before the tree is rebuilt
-/// (or to an eighth of the tree's size, whichever is larger).
-const TAIL_MIN: usize = 64;
+/// A tree over some committed faces.
+struct Level {
+    faces: Vec<u32>,
+    tree: Bvh,
+}
+
+impl Level {
+    fn new(mesh: &Mesh, faces: Vec<u32>) -> Level {
+        let tree = Bvh::build(faces.len(), |i| face_box(mesh, faces[i] as usize));
+        Level { faces, tree }
+    }
+}
+
+/// Committed faces scanned linearly before they are put in a tree.
+const TAIL: usize = 64;
 
 impl Checker {
     /// Prepares the checks for a mesh: builds the tree over its faces.
@@ -49,9 +84,8 @@ impl Checker {
         let base = Bvh::build(nf, |f| face_box(mesh, f));
         Checker {
             base,
-            committed: Vec::new(),
-            extra: Bvh::default(),
-            extra_len: 0,
+            levels: Vec::new(),
+            tail: Vec::new(),
             next_unseen: nf,
         }
     }
@@ -88,15 +122,23 @@ impl Checker {
     pub fn commit(&mut self, mesh: &Mesh, faces: std::ops::Range<usize>) {
         let end = faces.end.max(self.next_unseen).min(mesh.num_faces());
         for f in self.next_unseen..end {
-            self.committed.push(f as u32);
+            self.tail.push(f as u32);
         }
         self.next_unseen = self.next_unseen.max(end);
-        let tail = self.committed.len() - self.extra_len;
-        if tail > TAIL_MIN.max(self.extra_len / 8) {
-            let list = &self.committed;
-            self.extra = Bvh::build(list.len(), |i| face_box(mesh, list[i] as usize));
-            self.extra_len = list.len();
+        if self.tail.len() < TAIL {
+            return;
         }
+        let mut faces = std::mem::take(&mut self.tail);
+        // merge with every smaller-or-equal level at the end (a binary counter)
+        while let Some(last) = self.levels.last() {
+            if last.faces.len() > faces.len() {
+                break;
+            }
+            if let Some(l) = self.levels.pop() {
+                faces.extend_from_slice(&l.faces);
+            }
+        }
+        self.levels.push(Level::new(mesh, faces));
     }
 
     /// The self-intersection check (see [`tri_tri`] for the rules on shared vertices).
@@ -160,11 +202,10 @@ impl Checker {
             };
             let found = self.base.query(lo, hi, &mut test)
                 || self
-                    .extra
-                    .query(lo, hi, |j| test(self.committed[j] as usize))
-                || self.committed[self.extra_len..]
+                    .levels
                     .iter()
-                    .any(|&f| test(f as usize))
+                    .any(|l| l.tree.query(lo, hi, |j| test(l.faces[j] as usize)))
+                || self.tail.iter().any(|&f| test(f as usize))
                 || (self.next_unseen..mesh.num_faces()).any(&mut test);
             if found {
                 if let Some(f) = hit {
@@ -854,6 +895,74 @@ mod tests {
         }
     }
 
+    /// Separating-axis verdict in floating point: `Some(true/false)` when every
+    /// candidate axis is decisive by a margin, `None` when the case is too close
+    /// to call (or an axis is near zero).
+    fn sat(p: &[DVec3; 3], q: &[DVec3; 3]) -> Option<bool> {
+        let ep = [p[1] - p[0], p[2] - p[1], p[0] - p[2]];
+        let eq = [q[1] - q[0], q[2] - q[1], q[0] - q[2]];
+        let (np, nq) = (ep[0].cross(ep[1]), eq[0].cross(eq[1]));
+        let mut axes = vec![np, nq];
+        for a in ep {
+            axes.push(np.cross(a));
+            for b in eq {
+                axes.push(a.cross(b));
+            }
+        }
+        for b in eq {
+            axes.push(nq.cross(b));
+        }
+        let mut separated = false;
+        for ax in axes {
+            let len = ax.length();
+            if len < 1e-6 {
+                return None;
+            }
+            let proj = |t: &[DVec3; 3]| {
+                let d = t.map(|x| x.dot(ax) / len);
+                (d[0].min(d[1]).min(d[2]), d[0].max(d[1]).max(d[2]))
+            };
+            let ((a0, a1), (b0, b1)) = (proj(p), proj(q));
+            if a0 == a1 && b0 == b1 && a0 == b0 {
+                continue; // both flat on this axis, at the same place: no information
+            }
+            let gap = (b0 - a1).max(a0 - b1);
+            if gap.abs() < 1e-9 {
+                return None;
+            }
+            separated |= gap > 0.0;
+        }
+        Some(!separated)
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(2000))]
+        /// Agrees with an independent separating-axis test wherever that one is
+        /// decisive; and is unchanged by exact transformations (a power-of-two
+        /// scale, swapping the triangles).
+        #[test]
+        fn agrees_with_separating_axes(c in prop::array::uniform18(-1.0f64..1.0), k in -40i32..40) {
+            let t = |o: usize| [0, 1, 2].map(|i| v(c[o + 3 * i], c[o + 3 * i + 1], c[o + 3 * i + 2]));
+            let (p, q) = (t(0), t(9));
+            let r = tri_tri_plain(&p, &q);
+            if let Some(expect) = sat(&p, &q) {
+                prop_assert_eq!(r, expect);
+            }
+            let s = 2f64.powi(k);
+            prop_assert_eq!(r, tri_tri_plain(&q.map(|x| x * s), &p.map(|x| x * s)));
+        }
+
+        /// Coplanar pairs (both in z = 0) against the same oracle.
+        #[test]
+        fn coplanar_agrees_with_separating_axes(c in prop::array::uniform12(-1.0f64..1.0)) {
+            let t = |o: usize| [0, 1, 2].map(|i| v(c[o + 2 * i], c[o + 2 * i + 1], 0.0));
+            let (p, q) = (t(0), t(6));
+            if let Some(expect) = sat(&p, &q) {
+                prop_assert_eq!(tri_tri_plain(&p, &q), expect);
+            }
+        }
+    }
+
     // ---- whole-patch checks -------------------------------------------------
 
     /// A torus of 3 x 3 new vertices: closed, every vertex a single fan, chi = 0.
@@ -1145,7 +1254,16 @@ mod tests {
             inc.commit(&m, f..e);
             f = e;
         }
-        assert!(inc.extra_len > 0 && inc.extra_len < inc.committed.len());
+        // 288 faces in batches of 7: trees of 70 merged into 140, then 280, tail 8
+        assert!(!inc.levels.is_empty() && !inc.tail.is_empty() && inc.tail.len() < TAIL);
+        let sizes: Vec<usize> = inc.levels.iter().map(|l| l.faces.len()).collect();
+        assert!(sizes.windows(2).all(|w| w[0] > w[1]), "{sizes:?}");
+        let total: usize = sizes.iter().sum::<usize>() + inc.tail.len();
+        assert_eq!(total, m.num_faces() - nb);
+        let mut all: Vec<u32> = inc.levels.iter().flat_map(|l| l.faces.clone()).collect();
+        all.extend_from_slice(&inc.tail);
+        all.sort_unstable();
+        assert_eq!(all, (nb as u32..m.num_faces() as u32).collect::<Vec<_>>());
         for (apex, ok) in [
             (v(3., 3., 0.1), true),
             (v(3., 3., 1.), false),
@@ -1156,6 +1274,54 @@ mod tests {
             let b = inc.check_patch(&m, &hole, &p, &checks());
             assert_eq!(a.is_ok(), ok);
             assert_eq!(a.is_ok(), b.is_ok());
+        }
+    }
+
+    #[test]
+    fn dispatcher_rejects_a_fan_through_an_obstacle_and_fills_without_it() {
+        use crate::fill::{fill_hole, Hole};
+        use crate::policy::{Method, Policy};
+        use crate::report::{HoleStatus, Outcome};
+        let mut policy = Policy::default();
+        policy.dispatch.small = vec![Method::Fan];
+        for obstacle in [true, false] {
+            // a grid missing cell (2, 2), and a small upright triangle through the
+            // cell's centre (its own component)
+            let mut raw = RawMesh::default();
+            grid(5, 0.0, 0, &[(2, 2)], &mut raw);
+            if obstacle {
+                let b = raw.positions.len() as u32;
+                raw.positions
+                    .extend([v(2.5, 2.4, -0.5), v(2.6, 2.6, 0.5), v(2.4, 2.6, 0.5)]);
+                raw.faces.push([b, b + 1, b + 2]);
+            }
+            let (mut m, _) = Mesh::from_raw(&raw);
+            let l = m
+                .topo
+                .boundary_loops()
+                .into_iter()
+                .find(|l| l.len() == 4)
+                .unwrap();
+            let hole = Hole::new(0, &m, l, &policy);
+            let mut chk = Checker::new(&m);
+            let nf = m.num_faces();
+            let rep = fill_hole(&mut m, &hole, &policy, &mut chk);
+            if obstacle {
+                assert_eq!(rep.status, HoleStatus::Failed);
+                assert_eq!(rep.tried[0].outcome, Outcome::Rejected);
+                assert!(
+                    rep.tried[0].reason.contains("intersects mesh face"),
+                    "{}",
+                    rep.tried[0].reason
+                );
+                assert_eq!(m.num_faces(), nf);
+            } else {
+                assert_eq!(rep.status, HoleStatus::Filled, "{}", rep.reason);
+                assert_eq!(m.num_faces(), nf + 4);
+                m.validate().unwrap();
+                // the patch's faces were committed to the checker
+                assert_eq!(chk.tail.len(), 4);
+            }
         }
     }
 }

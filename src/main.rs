@@ -66,7 +66,7 @@ struct FillArgs {
     /// Write the repair log (JSON) here.
     #[arg(long)]
     report: Option<PathBuf>,
-    /// Output format (obj, ply, stl, off); default: the input's format.
+    /// Output format (obj, ply, stl, off); default: the output extension, else the input format.
     #[arg(long)]
     format: Option<String>,
     /// Print nothing but errors and the FILL_TIME_S line.
@@ -139,7 +139,8 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
                 format!("--format {name}: expected obj, ply, stl or off"),
             )
         })?,
-        None => in_format,
+        // the output path's extension, else the input's format
+        None => Format::from_path(&args.output).unwrap_or(in_format),
     };
 
     let t = Instant::now();

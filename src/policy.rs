@@ -116,7 +116,7 @@ pub struct Clean {
 impl Default for Clean {
     fn default() -> Self {
         Clean {
-            remove_teeth: true,
+            remove_teeth: false,
             split_long_edges: 0.0,
         }
     }

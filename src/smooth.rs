@@ -137,18 +137,16 @@ impl Stencils {
                         Weights::Cotangent => cotangent(mesh, v, &mut local),
                         Weights::Fujiwara => {
                             let mut ok = true;
-                            for w in mesh.topo.neighbors(v) {
-                                match inverse_length(p, mesh.pos(w)) {
-                                    Some(x) => local.push((w, x)),
-                                    None => ok = false,
-                                }
-                            }
+                            for_each_neighbor(mesh, v, |w| match inverse_length(p, mesh.pos(w)) {
+                                Some(x) => local.push((w, x)),
+                                None => ok = false,
+                            });
                             ok
                         }
                     };
                     if !ok {
                         local.clear();
-                        local.extend(mesh.topo.neighbors(v).into_iter().map(|w| (w, 1.0)));
+                        for_each_neighbor(mesh, v, |w| local.push((w, 1.0)));
                     }
                 }
             }
@@ -168,6 +166,13 @@ impl Stencils {
             .iter()
             .map(|&(w, wt)| (x[w.idx()] - p) * wt)
             .sum()
+    }
+}
+
+/// Calls `f` on every neighbour of interior vertex `v` once (no allocation).
+fn for_each_neighbor(mesh: &Mesh, v: VertexId, mut f: impl FnMut(VertexId)) {
+    for h in mesh.topo.outgoing(v) {
+        f(mesh.topo.to(h));
     }
 }
 
@@ -230,8 +235,12 @@ pub fn smooth(mesh: &mut Mesh, opts: &Smooth) -> SmoothingReport {
     }
     let original: Vec<DVec3> = plan.iter().map(|&(v, _)| mesh.pos(v)).collect();
     let mut delta = vec![DVec3::ZERO; plan.len()];
-    for _ in 0..opts.iterations {
-        let st = Stencils::compute(mesh, &plan, opts.weights);
+    // uniform weights do not depend on the positions: one stencil for all iterations
+    let mut st = Stencils::compute(mesh, &plan, opts.weights);
+    for it in 0..opts.iterations {
+        if it > 0 && opts.weights != Weights::Uniform {
+            st = Stencils::compute(mesh, &plan, opts.weights);
+        }
         for factor in [opts.lambda, opts.mu] {
             for (i, &(v, _)) in plan.iter().enumerate() {
                 delta[i] = st.laplacian(i, &mesh.positions, v) * factor;

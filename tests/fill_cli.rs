@@ -10,9 +10,9 @@ fn radius(p: V3) -> f64 {
 /// Cuts holes of every size class out of a unit icosphere.
 fn holed_sphere() -> (Soup, usize) {
     let s = icosphere(4); // 5120 faces, edge about 0.066
-    let (s, _) = cut(&s, [0.0, 0.0, 1.0], 0.09); // small
+    let (s, _) = cut(&s, [0.0, 0.0, 1.0], 0.05); // small
     let (s, _) = cut(&s, [1.0, 0.0, 0.0], 0.25); // middle
-    let (s, _) = cut(&s, [0.0, -0.6, -0.8], 0.55); // large
+    let (s, _) = cut(&s, [0.0, -0.6, -0.8], 0.7); // large
     (s, 3)
 }
 
@@ -34,29 +34,46 @@ fn sphere_holes_are_closed_on_the_sphere_and_input_is_bit_exact() {
         rep.to_str().unwrap(),
     ]);
     let stdout = String::from_utf8_lossy(&o.stdout);
-    assert_eq!(o.status.code(), Some(0), "stdout: {stdout}\nstderr: {}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "stdout: {stdout}\nstderr: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
     assert!(stdout.contains("FILL_TIME_S="), "{stdout}");
-    assert_eq!(stdout.lines().filter(|l| l.starts_with("hole")).count(), nholes, "{stdout}");
+    assert_eq!(
+        stdout.lines().filter(|l| l.starts_with("hole")).count(),
+        nholes,
+        "{stdout}"
+    );
 
     let r = read_obj(&out);
     assert_eq!(boundary_edges(&r), 0, "output still has holes");
     // input vertices first, unchanged, bit for bit
     for (i, p) in s.v.iter().enumerate() {
-        assert_eq!(r.v[i].map(f64::to_bits), p.map(f64::to_bits), "vertex {i} moved");
+        assert_eq!(
+            r.v[i].map(f64::to_bits),
+            p.map(f64::to_bits),
+            "vertex {i} moved"
+        );
     }
     // input faces kept
     for (i, f) in s.f.iter().enumerate() {
         assert_eq!(r.f[i], *f, "face {i} changed");
     }
     // new vertices on the sphere (bound: 1 % of the radius at worst, 0.3 % mean)
-    let new: Vec<f64> = r.v[s.v.len()..].iter().map(|&p| (radius(p) - 1.0).abs()).collect();
+    let new: Vec<f64> = r.v[s.v.len()..]
+        .iter()
+        .map(|&p| (radius(p) - 1.0).abs())
+        .collect();
     assert!(!new.is_empty());
     let max = new.iter().cloned().fold(0.0, f64::max);
     let mean = new.iter().sum::<f64>() / new.len() as f64;
     assert!(max < 0.01, "max radial error {max}");
     assert!(mean < 0.003, "mean radial error {mean}");
 
-    let log: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+    let log: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
     let holes = log["holes"].as_array().unwrap();
     assert_eq!(holes.len(), nholes);
     let classes: Vec<&str> = holes.iter().map(|h| h["class"].as_str().unwrap()).collect();
@@ -66,7 +83,11 @@ fn sphere_holes_are_closed_on_the_sphere_and_input_is_bit_exact() {
     for h in holes {
         assert_eq!(h["status"], "filled", "{h}");
         assert!(h["method"].is_string());
-        assert!(h["tried"].as_array().unwrap().iter().any(|a| a["outcome"] == "accepted"));
+        assert!(h["tried"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|a| a["outcome"] == "accepted"));
         assert!(h["quality"]["q_good_share"].as_f64().unwrap() > 0.0);
     }
     assert_eq!(log["summary"]["filled"], nholes);
@@ -84,10 +105,18 @@ fn torus_hole_stays_on_the_torus() {
     let out = dir.path().join("torus.out.obj");
     write_obj(&inp, &s);
     let o = run(&["fill", inp.to_str().unwrap(), out.to_str().unwrap(), "-q"]);
-    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
     let r = read_obj(&out);
     assert_eq!(boundary_edges(&r), 0);
-    let errs: Vec<f64> = r.v[s.v.len()..].iter().map(|&p| torus_distance(p, 2.0, 0.7)).collect();
+    let errs: Vec<f64> = r.v[s.v.len()..]
+        .iter()
+        .map(|&p| torus_distance(p, 2.0, 0.7))
+        .collect();
     let mean = errs.iter().sum::<f64>() / errs.len().max(1) as f64;
     // bound: 2 % of the minor radius on average
     assert!(mean < 0.014, "mean distance to the torus {mean}");
@@ -104,7 +133,11 @@ fn malformed_input_exits_65_and_writes_nothing() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("bad.obj"), "{err}");
     assert!(!out.exists());
-    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1, "something was left behind");
+    assert_eq!(
+        std::fs::read_dir(dir.path()).unwrap().count(),
+        1,
+        "something was left behind"
+    );
 }
 
 #[test]
@@ -116,7 +149,13 @@ fn invalid_policy_exits_78() {
     let pol = dir.path().join("p.toml");
     std::fs::write(&pol, "[dispatch]\nsmall = [\"nope\"]\n").unwrap();
     let out = dir.path().join("o.obj");
-    let o = run(&["fill", inp.to_str().unwrap(), out.to_str().unwrap(), "--policy", pol.to_str().unwrap()]);
+    let o = run(&[
+        "fill",
+        inp.to_str().unwrap(),
+        out.to_str().unwrap(),
+        "--policy",
+        pol.to_str().unwrap(),
+    ]);
     assert_eq!(o.status.code(), Some(78));
     assert!(!out.exists());
 }
@@ -129,48 +168,73 @@ fn unwritable_output_exits_74_and_leaves_nothing() {
     write_obj(&inp, &s);
     let out = dir.path().join("no/such/folder/o.obj");
     let o = run(&["fill", inp.to_str().unwrap(), out.to_str().unwrap()]);
-    assert_eq!(o.status.code(), Some(74), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(
+        o.status.code(),
+        Some(74),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
 }
 
 #[test]
 fn failed_holes_exit_2_with_output_written_and_reasons_logged() {
     let dir = tempdir();
-    let (s, _) = holed_sphere();
+    let (mut s, _) = holed_sphere();
+    // a small closed tetrahedron sits in the middle of the pole hole: every patch
+    // spanning that hole must cross it, so every method is rejected there
+    let c = [0.0, 0.0, 0.997];
+    let a = 0.02 / 3f64.sqrt();
+    let base = s.v.len();
+    for d in [[1., 1., 1.], [1., -1., -1.], [-1., 1., -1.], [-1., -1., 1.]] {
+        s.v.push([c[0] + a * d[0], c[1] + a * d[1], c[2] + a * d[2]]);
+    }
+    for f in [[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]] {
+        s.f.push([base + f[0], base + f[1], base + f[2]]);
+    }
     let inp = dir.path().join("s.obj");
     write_obj(&inp, &s);
-    // an impossible minimum angle makes every patch fail its checks
-    let pol = dir.path().join("p.toml");
-    std::fs::write(&pol, "[checks]\nmin_angle_deg = 29.9\n").unwrap();
     let out = dir.path().join("o.obj");
     let rep = dir.path().join("o.json");
     let o = run(&[
         "fill",
         inp.to_str().unwrap(),
         out.to_str().unwrap(),
-        "--policy",
-        pol.to_str().unwrap(),
         "--report",
         rep.to_str().unwrap(),
     ]);
-    assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stdout));
+    assert_eq!(
+        o.status.code(),
+        Some(2),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
     assert!(out.exists());
-    let log: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
-    let failed: Vec<_> = log["holes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|h| h["status"] == "failed")
-        .collect();
-    assert!(!failed.is_empty());
-    for h in failed {
-        assert!(h["reason"].as_str().unwrap().contains("smallest angle"), "{h}");
-        assert!(h["tried"].as_array().unwrap().len() >= 2, "{h}");
-    }
+    let log: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+    let holes = log["holes"].as_array().unwrap();
+    let failed: Vec<_> = holes.iter().filter(|h| h["status"] == "failed").collect();
+    assert_eq!(failed.len(), 1, "{holes:?}");
+    let h = failed[0];
+    assert_eq!(h["class"], "small");
+    let k = h["boundary_vertices"].as_u64().unwrap() as usize;
+    assert!(h["reason"].as_str().unwrap().contains("intersects"), "{h}");
+    let tried = h["tried"].as_array().unwrap();
+    assert_eq!(tried.len(), 2, "{h}");
+    assert!(tried.iter().all(|a| a["outcome"] == "rejected"), "{h}");
+    // the other holes are filled and the output still has exactly that hole open
+    assert_eq!(holes.iter().filter(|h| h["status"] == "filled").count(), 2);
+    let r = read_obj(&out);
+    assert_eq!(boundary_edges(&r), k);
 }
 
 #[test]
 fn check_policy_accepts_the_shipped_policy() {
     let p = concat!(env!("CARGO_MANIFEST_DIR"), "/config/policy.toml");
     let o = run(&["check-policy", p]);
-    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
 }

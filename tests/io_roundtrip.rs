@@ -761,3 +761,22 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn ply_integer_coordinates_and_count_types() {
+    let src = "ply\nformat ascii 1.0\nelement vertex 3\nproperty short x\nproperty int16 y\n\
+               property uint8 z\nelement face 1\nproperty list char uint vertex_indices\n\
+               end_header\n-3 0 0\n1 -2 0\n0 1 255\n3 2 1 0\n";
+    let (_d, _p, r) = read_bytes("i.ply", src.as_bytes());
+    let m = r.unwrap();
+    assert_eq!(m.precision, Precision::F32);
+    assert_eq!(m.positions[2], DVec3::new(0.0, 1.0, 255.0));
+    assert_eq!(m.faces, vec![[2, 1, 0]]);
+    let wide = src.replace("property short x", "property int x");
+    let (_d, _p, r) = read_bytes("i.ply", wide.as_bytes());
+    assert_eq!(r.unwrap().precision, Precision::F64);
+    // Float indices are a header lie about types.
+    let bad = src.replace("char uint vertex_indices", "char float vertex_indices");
+    let msg = assert_malformed("f.ply", bad.as_bytes());
+    assert!(msg.contains("list of integers"), "{msg}");
+}

@@ -98,7 +98,11 @@ pub fn torus(r1: f64, r2: f64, n: usize, m: usize) -> Soup {
         let u = i as f64 / n as f64 * std::f64::consts::TAU;
         for j in 0..m {
             let w = j as f64 / m as f64 * std::f64::consts::TAU;
-            s.v.push([(r1 + r2 * w.cos()) * u.cos(), (r1 + r2 * w.cos()) * u.sin(), r2 * w.sin()]);
+            s.v.push([
+                (r1 + r2 * w.cos()) * u.cos(),
+                (r1 + r2 * w.cos()) * u.sin(),
+                r2 * w.sin(),
+            ]);
         }
     }
     let id = |i: usize, j: usize| (i % n) * m + (j % m);
@@ -124,7 +128,9 @@ pub fn cut(s: &Soup, center: V3, radius: f64) -> (Soup, Soup) {
     let mut gone = Vec::new();
     for f in &s.f {
         let c = [0, 1, 2].map(|k| (s.v[f[0]][k] + s.v[f[1]][k] + s.v[f[2]][k]) / 3.0);
-        let d = ((c[0] - center[0]).powi(2) + (c[1] - center[1]).powi(2) + (c[2] - center[2]).powi(2)).sqrt();
+        let d =
+            ((c[0] - center[0]).powi(2) + (c[1] - center[1]).powi(2) + (c[2] - center[2]).powi(2))
+                .sqrt();
         if d < radius {
             gone.push(*f);
         } else {
@@ -176,7 +182,14 @@ pub fn read_obj(path: &Path) -> Soup {
             }
             Some("f") => {
                 let c: Vec<usize> = it
-                    .map(|x| x.split('/').next().unwrap_or("").parse::<usize>().expect("index") - 1)
+                    .map(|x| {
+                        x.split('/')
+                            .next()
+                            .unwrap_or("")
+                            .parse::<usize>()
+                            .expect("index")
+                            - 1
+                    })
                     .collect();
                 for k in 1..c.len() - 1 {
                     s.f.push([c[0], c[k], c[k + 1]]);
@@ -207,7 +220,10 @@ pub fn bin() -> PathBuf {
 
 /// Runs holefill with arguments.
 pub fn run(args: &[&str]) -> Output {
-    Command::new(bin()).args(args).output().expect("run holefill")
+    Command::new(bin())
+        .args(args)
+        .output()
+        .expect("run holefill")
 }
 
 /// A fresh temporary folder.
