@@ -142,3 +142,56 @@ fn fifty_waiting_files_ready_only_after_the_scan() {
         "{rest:?}"
     );
 }
+
+#[test]
+fn watchdog_pings_arrive_while_idle_and_reload_is_announced() {
+    let f = Folders::new();
+    let sock_path = f.root().join("notify.sock");
+    let sock = UnixDatagram::bind(&sock_path).unwrap();
+    sock.set_read_timeout(Some(Duration::from_millis(100)))
+        .unwrap();
+    let err = f.root().join("daemon-wd.log");
+    // WATCHDOG_PID must be the daemon's pid: the shell execs into it, keeping its pid
+    let child = std::process::Command::new("/bin/sh")
+        .arg("-c")
+        .arg("WATCHDOG_PID=$$ WATCHDOG_USEC=400000 exec \"$0\" watch --inbox \"$1\"")
+        .arg(bin())
+        .arg(&f.inbox)
+        .env("NOTIFY_SOCKET", &sock_path)
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::fs::File::create(&err).unwrap())
+        .spawn()
+        .unwrap();
+    let mut d = Daemon { child, stderr: err };
+    let mut buf = [0u8; 4096];
+    // counts the lines `what` until `enough` of them or `secs` seconds
+    let mut recv_until = |what: &str, enough: usize, secs: u64| -> usize {
+        let t = Instant::now();
+        let mut n = 0;
+        while t.elapsed() < Duration::from_secs(secs) && n < enough {
+            if let Ok(k) = sock.recv(&mut buf) {
+                n += String::from_utf8_lossy(&buf[..k])
+                    .lines()
+                    .filter(|l| *l == what)
+                    .count();
+            }
+        }
+        n
+    };
+    // READY first, then pings every 200 ms while nothing happens
+    assert!(recv_until("READY=1", 1, 5) >= 1, "{}", d.log());
+    let pings = recv_until("WATCHDOG=1", usize::MAX, 2);
+    assert!(
+        pings >= 4,
+        "{pings} pings in 2 s (every 200 ms expected)\n{}",
+        d.log()
+    );
+    d.signal("HUP");
+    assert!(recv_until("RELOADING=1", 1, 5) >= 1, "{}", d.log());
+    d.signal("TERM");
+    assert_eq!(
+        d.wait_exit(Duration::from_secs(20)).and_then(|s| s.code()),
+        Some(0)
+    );
+}

@@ -118,8 +118,10 @@ pub fn run(args: WatchArgs) -> Result<()> {
         .build()
         .context("cannot start the async runtime")?;
     let r = rt.block_on(async move {
+        // handlers first: a SIGTERM during the start-up scan is a clean stop too
+        let signals = Signals::new()?;
         let d = Daemon::start(args, settings).await?;
-        d.run().await
+        d.run(signals).await
     });
     rt.shutdown_timeout(Duration::from_secs(2));
     if let Err(e) = &r {
@@ -162,6 +164,24 @@ fn snapshot_policy(settings: &Settings, dir: &Path, generation: u32) -> Result<O
     holefill::io::write_atomic(&snap, text.as_bytes())
         .map_err(|e| anyhow::anyhow!("cannot store the policy snapshot: {e}"))?;
     Ok(Some(snap))
+}
+
+/// The signals the daemon handles.
+struct Signals {
+    sigterm: tokio::signal::unix::Signal,
+    sigint: tokio::signal::unix::Signal,
+    sighup: tokio::signal::unix::Signal,
+}
+
+impl Signals {
+    fn new() -> Result<Signals> {
+        use tokio::signal::unix::{signal, SignalKind};
+        Ok(Signals {
+            sigterm: signal(SignalKind::terminate())?,
+            sigint: signal(SignalKind::interrupt())?,
+            sighup: signal(SignalKind::hangup())?,
+        })
+    }
 }
 
 struct Daemon {
@@ -310,11 +330,12 @@ impl Daemon {
         )
     }
 
-    async fn run(mut self) -> Result<()> {
-        use tokio::signal::unix::{signal, SignalKind};
-        let mut sigterm = signal(SignalKind::terminate())?;
-        let mut sigint = signal(SignalKind::interrupt())?;
-        let mut sighup = signal(SignalKind::hangup())?;
+    async fn run(mut self, signals: Signals) -> Result<()> {
+        let Signals {
+            mut sigterm,
+            mut sigint,
+            mut sighup,
+        } = signals;
         let tick =
             (self.settings.settle / 4).clamp(Duration::from_millis(20), Duration::from_millis(250));
         let tick = if self.settings.poll {
