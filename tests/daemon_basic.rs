@@ -302,3 +302,66 @@ fn poll_mode_finds_files_without_change_events() {
         );
     }
 }
+
+#[test]
+fn config_file_is_read_and_on_success_delete_removes_the_original() {
+    let f = Folders::new();
+    let cfg = f.root().join("holefill.toml");
+    // folders from the config file; outbox etc. default to siblings of the inbox
+    fs::write(
+        &cfg,
+        format!(
+            "inbox = {:?}\nworkers = 1\nsettle_ms = 300\non_success = \"delete\"\nlog_format = \"json\"\n",
+            f.inbox.to_str().unwrap()
+        ),
+    )
+    .unwrap();
+    let err = f.root().join("daemon-cfg.log");
+    let child = std::process::Command::new(bin())
+        .args(["watch", "--config", cfg.to_str().unwrap()])
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::null())
+        .stderr(fs::File::create(&err).unwrap())
+        .spawn()
+        .unwrap();
+    let mut d = Daemon { child, stderr: err };
+    assert!(
+        wait_until(LONG, || d.log().contains("holefill watch ready")),
+        "{}",
+        d.log()
+    );
+    assert!(d.log().contains("\"workers\":1"), "{}", d.log());
+    let (obj, _) = mesh();
+    drop_renamed(&f.inbox, "gone.obj", &obj);
+    assert!(
+        wait_until(LONG, || f.outbox.join("gone.obj.repair.json").is_file()),
+        "{}",
+        d.log()
+    );
+    assert!(wait_until(LONG, || Folders::files(&f.inbox).is_empty()
+        && f.processing().is_empty()));
+    assert!(f.archive.is_dir(), "created as the inbox's sibling");
+    assert!(
+        Folders::files(&f.archive).is_empty(),
+        "deleted, not archived"
+    );
+    assert_eq!(
+        Folders::log(&f.outbox, "gone.obj")["daemon"]["original"],
+        "deleted"
+    );
+
+    // an unknown key is refused at start
+    fs::write(&cfg, "inbx = \"/tmp\"\n").unwrap();
+    let out = std::process::Command::new(bin())
+        .args(["watch", "--config", cfg.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert_ne!(out.status.code(), Some(0));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("inbx"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    d.signal("TERM");
+    assert_eq!(d.wait_exit(LONG).and_then(|s| s.code()), Some(0));
+}
