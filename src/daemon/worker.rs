@@ -628,7 +628,7 @@ fn finish_repaired(
     };
     if !tmp_model.is_file() {
         return Err((
-            "worker",
+            "output",
             format!("the worker exited {code} but wrote no model"),
             false,
         ));
@@ -638,7 +638,7 @@ fn finish_repaired(
         .and_then(|b| serde_json::from_slice(&b).ok())
         .ok_or_else(|| {
             (
-                "worker",
+                "output",
                 format!("the worker exited {code} but wrote no readable repair log"),
                 false,
             )
