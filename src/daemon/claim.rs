@@ -226,6 +226,41 @@ pub fn is_alive(pid: u32) -> bool {
 pub struct Recovered {
     pub name: String,
     pub sidecar: Sidecar,
+    /// The dead daemon had already published its model and log under this outbox name
+    /// (it died before archiving the original): nothing to repair again.
+    pub published: Option<String>,
+}
+
+/// What a dead daemon had published of `name`. Its worker's model stays linked in the
+/// daemon's temporary folder until the original is archived, so an outbox file with the
+/// same inode is its output: complete when its log is there too (`Some(name)`), else a
+/// partial publish, which is withdrawn (`None`: repair again).
+fn published(layout: &Layout, tmp_dir: &Path, name: &str) -> Option<String> {
+    use std::os::unix::fs::MetadataExt;
+    let m = fs::metadata(tmp_dir.join(name)).ok()?;
+    if m.nlink() < 2 {
+        return None;
+    }
+    for e in fs::read_dir(&layout.outbox).ok()?.flatten() {
+        let n = e.file_name().to_string_lossy().into_owned();
+        if n.ends_with(".repair.json") {
+            continue;
+        }
+        let Ok(om) = e.metadata() else { continue };
+        if om.dev() == m.dev() && om.ino() == m.ino() {
+            if n.starts_with('.') {
+                let _ = fs::remove_file(e.path()); // an overwrite's temporary link
+                continue;
+            }
+            if layout.outbox.join(format!("{n}.repair.json")).exists() {
+                return Some(n);
+            }
+            let _ = fs::remove_file(e.path());
+            let _ = fsops::fsync_dir(&layout.outbox);
+            return None;
+        }
+    }
+    None
 }
 
 /// Takes over the files of dead daemons of this host (and of an earlier daemon with
@@ -296,7 +331,13 @@ pub fn recover(layout: &Layout, id: &Identity, startup: bool) -> Vec<Recovered> 
             if !ours {
                 let _ = fs::remove_file(&old_sidecar);
             }
-            out.push(Recovered { name, sidecar });
+            let tmp_dir = layout.tmp_root.join(&tag);
+            let published = published(layout, &tmp_dir, &name);
+            out.push(Recovered {
+                name,
+                sidecar,
+                published,
+            });
         }
         if !ours {
             // leftover sidecars (their files were put back or finished), then the folder

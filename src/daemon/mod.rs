@@ -404,6 +404,10 @@ impl Daemon {
             if self.working.contains(&r.name) || self.again.iter().any(|(j, _)| j.name == r.name) {
                 continue;
             }
+            if let Some(output) = &r.published {
+                self.finish_published(&r.name, output);
+                continue;
+            }
             tracing::warn!(file = %r.name, attempts = r.sidecar.attempts, "recovered from a daemon that died while repairing it");
             self.again.push_back((
                 Job {
@@ -432,6 +436,34 @@ impl Daemon {
                 }
             }
             Err(e) => tracing::error!("cannot list the inbox {}: {e}", self.layout.inbox.display()),
+        }
+    }
+
+    /// A recovered file whose model and log a dead daemon had already published: only
+    /// the original's archiving (or deletion) was left to do.
+    fn finish_published(&mut self, name: &str, output: &str) {
+        let src = self.layout.mine.join(name);
+        let r = match self.settings.on_success {
+            OnSuccess::Archive => {
+                fsops::move_into(&src, &self.layout.archive, name, &[]).map(|_| ())
+            }
+            OnSuccess::Delete => std::fs::remove_file(&src),
+        };
+        match r {
+            Ok(()) => {
+                let _ = std::fs::remove_file(self.layout.sidecar(name));
+                let _ = fsops::fsync_dir(&self.layout.mine);
+                self.repaired += 1;
+                tracing::info!(
+                    file = %name,
+                    status = "repaired",
+                    output = %output,
+                    "{name} repaired -> {output} (by a daemon that died before archiving the original; not repaired again)"
+                );
+            }
+            Err(e) => {
+                tracing::error!(file = %name, "{name}: already repaired as {output}, but the original could not be archived: {e}")
+            }
         }
     }
 

@@ -728,10 +728,11 @@ fn finish_repaired(
     if let Err(e) = fsops::fsync_dir(&l.outbox) {
         tracing::warn!(file = %job.name, "fsync of the outbox failed: {e}");
     }
-    let _ = fs::remove_file(tmp_model);
     let _ = fs::remove_file(child_log);
 
-    // only now the original
+    // only now the original (the worker's model stays linked in our temporary folder
+    // until the original is gone: a daemon recovering our files after a crash here
+    // recognises the published output by its inode)
     let src = l.mine.join(&job.name);
     let moved = match ctx.settings.on_success {
         OnSuccess::Archive => fsops::move_into(&src, &l.archive, &job.name, &[]).map(|p| {
@@ -742,6 +743,7 @@ fn finish_repaired(
     };
     let _ = fs::remove_file(l.sidecar(&job.name));
     let _ = fsops::fsync_dir(&l.mine);
+    let _ = fs::remove_file(tmp_model);
     match moved {
         Ok(_) => Ok(Done::Repaired {
             name: job.name.clone(),
