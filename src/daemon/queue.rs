@@ -156,6 +156,20 @@ impl Pending {
                 i += 1;
                 continue;
             }
+            // cannot be ready yet whatever its stat says: spare the system call (a
+            // change is caught by the stat at the moment it could be taken)
+            let quiet = e
+                .last_event
+                .map_or(Duration::MAX, |t| now.saturating_duration_since(t));
+            let too_soon = e.stat.is_some()
+                && !(e.renamed_in && !e.open_write)
+                && ((e.open_write && quiet < settle * 10)
+                    || now.saturating_duration_since(e.stable_since) < settle
+                    || quiet < settle);
+            if too_soon {
+                i += 1;
+                continue;
+            }
             let md = match fs::symlink_metadata(inbox.join(&name)) {
                 Ok(m) if m.is_file() => m,
                 _ => {
