@@ -161,8 +161,9 @@ impl Pending {
             let quiet = e
                 .last_event
                 .map_or(Duration::MAX, |t| now.saturating_duration_since(t));
+            let complete = e.renamed_in && !e.open_write;
             let too_soon = e.stat.is_some()
-                && !(e.renamed_in && !e.open_write)
+                && !complete
                 && ((e.open_write && quiet < settle * 10)
                     || now.saturating_duration_since(e.stable_since) < settle
                     || quiet < settle);
