@@ -365,3 +365,28 @@ fn config_file_is_read_and_on_success_delete_removes_the_original() {
     d.signal("TERM");
     assert_eq!(d.wait_exit(LONG).and_then(|s| s.code()), Some(0));
 }
+
+#[test]
+fn collision_overwrite_replaces_the_earlier_output_when_asked() {
+    let f = Folders::new();
+    fs::create_dir_all(&f.outbox).unwrap();
+    fs::write(f.outbox.join("scan.obj"), "earlier output").unwrap();
+    fs::write(f.outbox.join("scan.obj.repair.json"), "{}").unwrap();
+    let d = Daemon::ready(&f, &["--collision", "overwrite"], &[]);
+    let (obj, _) = mesh();
+    drop_renamed(&f.inbox, "scan.obj", &obj);
+    assert!(
+        wait_until(LONG, || Folders::files(&f.archive) == vec!["scan.obj"]),
+        "{}",
+        d.log()
+    );
+    assert_eq!(
+        Folders::files(&f.outbox),
+        vec!["scan.obj", "scan.obj.repair.json"]
+    );
+    assert_ne!(
+        fs::read_to_string(f.outbox.join("scan.obj")).unwrap(),
+        "earlier output"
+    );
+    assert_eq!(Folders::log(&f.outbox, "scan.obj")["status"], "repaired");
+}
