@@ -77,7 +77,16 @@ struct FillArgs {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.cmd {
-        Cmd::Fill(args) => ExitCode::from(run_fill(&args)),
+        Cmd::Fill(args) => {
+            // diagnostics of the methods go to stderr when RUST_LOG asks for them
+            if std::env::var_os("RUST_LOG").is_some() {
+                let _ = tracing_subscriber::fmt()
+                    .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
+                    .with_writer(std::io::stderr)
+                    .try_init();
+            }
+            ExitCode::from(run_fill(&args))
+        }
         Cmd::CheckPolicy { file } => match Policy::from_file(&file) {
             Ok(_) => {
                 println!("{}: ok", file.display());

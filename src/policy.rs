@@ -41,17 +41,25 @@ pub enum Method {
     MinAreaFair,
     /// Improved advancing front (paper 002 §5.3).
     AdvancingFront,
+    /// Plain advancing front, LS-SVM prediction of the Laplacian, Poisson solve (paper 003).
+    LssvmPoisson,
 }
 
 impl Method {
     /// Every method, in policy spelling.
-    pub const ALL: &'static [Method] = &[Method::Fan, Method::MinAreaFair, Method::AdvancingFront];
+    pub const ALL: &'static [Method] = &[
+        Method::Fan,
+        Method::MinAreaFair,
+        Method::AdvancingFront,
+        Method::LssvmPoisson,
+    ];
     /// The policy spelling.
     pub fn name(self) -> &'static str {
         match self {
             Method::Fan => "fan",
             Method::MinAreaFair => "min_area_fair",
             Method::AdvancingFront => "advancing_front",
+            Method::LssvmPoisson => "lssvm_poisson",
         }
     }
 }
@@ -217,6 +225,73 @@ impl Default for Front {
     }
 }
 
+/// LS-SVM + Poisson (paper 003, Xu et al. 2013; ALGORITHMS E).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct Lssvm {
+    /// Rings of mesh vertices around the hole whose Laplacians train the regression.
+    pub rings: usize,
+    /// LS-SVM regularisation `gamma` of eq. 11/14 (larger: closer fit, less smoothing).
+    pub gamma: f64,
+    /// RBF kernel width sigma, in units of the hole loop's radius (perimeter / 2π).
+    pub kernel_width: f64,
+    /// Outer iterations of predict-then-solve (the Laplacian is recomputed each time).
+    pub iterations: usize,
+    /// A new front vertex closer than this times the mean boundary edge length to a
+    /// front vertex is merged into it.
+    pub merge_distance: f64,
+}
+
+impl Default for Lssvm {
+    fn default() -> Self {
+        Lssvm {
+            rings: 3,
+            gamma: 10.0,
+            kernel_width: 0.7,
+            iterations: 2,
+            merge_distance: 0.5,
+        }
+    }
+}
+
+impl Lssvm {
+    /// Range checks.
+    pub fn validate(&self) -> Result<(), Invalid> {
+        if self.rings == 0 || self.rings > 20 {
+            return Err(Invalid::new(
+                "lssvm.rings",
+                format!("must be in 1..=20 (got {})", self.rings),
+            ));
+        }
+        if !(self.gamma.is_finite() && self.gamma > 0.0 && self.gamma <= 1e10) {
+            return Err(Invalid::new(
+                "lssvm.gamma",
+                format!("must be in (0, 1e10] (got {})", self.gamma),
+            ));
+        }
+        if !(self.kernel_width.is_finite() && self.kernel_width > 0.0 && self.kernel_width <= 100.0)
+        {
+            return Err(Invalid::new(
+                "lssvm.kernel_width",
+                format!("must be in (0, 100] (got {})", self.kernel_width),
+            ));
+        }
+        if self.iterations == 0 || self.iterations > 100 {
+            return Err(Invalid::new(
+                "lssvm.iterations",
+                format!("must be in 1..=100 (got {})", self.iterations),
+            ));
+        }
+        if !(self.merge_distance.is_finite() && (0.0..1.0).contains(&self.merge_distance)) {
+            return Err(Invalid::new(
+                "lssvm.merge_distance",
+                format!("must be in [0, 1) (got {})", self.merge_distance),
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Patch checks (ALGORITHMS A5).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
@@ -315,6 +390,7 @@ pub struct Policy {
     pub checks: Checks,
     pub limits: Limits,
     pub smooth: Smooth,
+    pub lssvm: Lssvm,
 }
 
 /// A name as the policy spells it (methods and the other string-valued keys).
@@ -417,6 +493,16 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
             "scope",
             "rings",
             "boundary",
+        ],
+    ),
+    (
+        "lssvm",
+        &[
+            "rings",
+            "gamma",
+            "kernel_width",
+            "iterations",
+            "merge_distance",
         ],
     ),
 ];
@@ -726,6 +812,7 @@ impl Policy {
                 ),
             ));
         }
+        self.lssvm.validate()?;
         Ok(())
     }
 }
@@ -1006,6 +1093,11 @@ impl Reader<'_> {
                 p.front.max_steps_per_vertex = self.usize(key, v)?
             }
             ("front", "fair") => p.front.fair = self.boolean(key, v)?,
+            ("lssvm", "rings") => p.lssvm.rings = self.usize(key, v)?,
+            ("lssvm", "gamma") => p.lssvm.gamma = self.float(key, v)?,
+            ("lssvm", "kernel_width") => p.lssvm.kernel_width = self.float(key, v)?,
+            ("lssvm", "iterations") => p.lssvm.iterations = self.usize(key, v)?,
+            ("lssvm", "merge_distance") => p.lssvm.merge_distance = self.float(key, v)?,
             ("checks", "self_intersection") => p.checks.self_intersection = self.boolean(key, v)?,
             ("checks", "min_angle_deg") => p.checks.min_angle_deg = self.float(key, v)?,
             ("limits", "hole_time_ms") => p.limits.hole_time_ms = self.uint(key, v)?,
@@ -1215,7 +1307,7 @@ mod tests {
             }
         }
         assert_eq!(root.len(), TOP_LEVEL_KEYS.len() + SECTIONS.len());
-        assert_eq!(n, 33);
+        assert_eq!(n, SECTIONS.iter().map(|(_, k)| k.len()).sum::<usize>());
     }
 
     #[test]
@@ -1302,10 +1394,10 @@ mod tests {
         let e = err("[limits]\nbananas = 3\n");
         assert_eq!(e.line, Some(2));
         assert_eq!(e.message, "unknown key; [limits] has `hole_time_ms`");
-        let e = err("[front]\nrings = 3\n");
+        let e = err("[front]\nonly_longest = true\n");
         assert_eq!(
             e.message,
-            "unknown key; `rings` belongs in [smooth], not [front]"
+            "unknown key; `only_longest` belongs in [border], not [front]"
         );
         let e = err("[smooth]\nseed = 3\n");
         assert!(e.message.contains("belongs at the top level"), "{e}");
@@ -1350,13 +1442,21 @@ mod tests {
         assert_eq!(e.key.as_deref(), Some("dispatch.middle"));
         assert_eq!(
             e.message,
-            "unknown method \"advancing-front\"; did you mean \"advancing_front\"? \
-             (methods: \"fan\", \"min_area_fair\", \"advancing_front\")"
+            format!(
+                "unknown method \"advancing-front\"; did you mean \"advancing_front\"? (methods: {})",
+                Method::ALL
+                    .iter()
+                    .map(|m| format!("\"{}\"", m.name()))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
         );
         let e = err("[dispatch]\nsmall = [\"delaunay\"]\n");
-        assert_eq!(
-            e.message,
-            "unknown method \"delaunay\"; (methods: \"fan\", \"min_area_fair\", \"advancing_front\")"
+        assert!(
+            e.message
+                .starts_with("unknown method \"delaunay\"; (methods: \"fan\", \"min_area_fair\", \"advancing_front\""),
+            "{}",
+            e.message
         );
         let e = err("[dispatch]\nsmall = \"fan\"\n");
         assert!(
@@ -1666,6 +1766,7 @@ mod tests {
                 smooth: Smooth {
                     enabled, iterations, lambda: lm.0, mu: lm.1, weights: smooth_weights, scope, rings, boundary,
                 },
+                ..Policy::default()
             }
         }
     }

@@ -5,12 +5,87 @@
 use crate::fill::geom;
 use glam::DVec3;
 use std::collections::{HashMap, HashSet};
+use std::f64::consts::PI;
 
-/// Smallest interior angle of a triangle (radians).
+/// Smallest interior angle of a triangle (radians): the angle opposite its shortest
+/// edge (0 for a degenerate triangle).
 pub fn min_angle(a: DVec3, b: DVec3, c: DVec3) -> f64 {
-    let g = geom::angles(a, b, c);
-    g[0].min(g[1]).min(g[2])
+    let (la, lb, lc) = (
+        (b - c).length_squared(),
+        (c - a).length_squared(),
+        (a - b).length_squared(),
+    );
+    // the corner opposite the shortest edge, and its two edges
+    let (p, q, r) = if la <= lb && la <= lc {
+        (a, b, c)
+    } else if lb <= lc {
+        (b, c, a)
+    } else {
+        (c, a, b)
+    };
+    let (u, v) = (q - p, r - p);
+    let cr = u.cross(v).length();
+    let dt = u.dot(v);
+    if cr == 0.0 && dt == 0.0 {
+        0.0
+    } else {
+        cr.atan2(dt)
+    }
 }
+
+/// Sine of the smallest interior angle (which is at most 60 degrees, so the sine is
+/// monotonic in it): cheaper than [`min_angle`] for comparisons.
+pub fn min_angle_sin(a: DVec3, b: DVec3, c: DVec3) -> f64 {
+    let (la, lb, lc) = (
+        (b - c).length_squared(),
+        (c - a).length_squared(),
+        (a - b).length_squared(),
+    );
+    let (p, q, r, l1, l2) = if la <= lb && la <= lc {
+        (a, b, c, lc, lb)
+    } else if lb <= lc {
+        (b, c, a, la, lc)
+    } else {
+        (c, a, b, lb, la)
+    };
+    let d = (l1 * l2).sqrt();
+    if d > 0.0 {
+        (q - p).cross(r - p).length() / d
+    } else {
+        0.0
+    }
+}
+
+/// A fast hasher for small integer keys (FxHash's multiply-rotate).
+#[derive(Clone, Copy, Default)]
+pub struct FxHasher(u64);
+
+impl std::hash::Hasher for FxHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(b as u64);
+        }
+    }
+    fn write_u32(&mut self, i: u32) {
+        self.write_u64(i as u64);
+    }
+    fn write_u64(&mut self, i: u64) {
+        self.0 = (self.0.rotate_left(5) ^ i).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+    fn write_usize(&mut self, i: usize) {
+        self.write_u64(i as u64);
+    }
+}
+
+/// Build hasher of [`FxHasher`].
+pub type FxBuild = std::hash::BuildHasherDefault<FxHasher>;
+/// A hash map keyed by small integers.
+pub type FxMap<K, V> = HashMap<K, V, FxBuild>;
+/// A hash set of small integers.
+pub type FxSet<K> = HashSet<K, FxBuild>;
 
 fn unit_normal(a: DVec3, b: DVec3, c: DVec3) -> DVec3 {
     geom::tri_normal_raw(a, b, c).normalize_or_zero()
@@ -22,92 +97,102 @@ pub struct SwapRules<'a> {
     pub k: usize,
     /// Loop-vertex pairs `(i, j)`, `i < j`, already joined by a mesh edge outside the
     /// patch: never create them.
-    pub forbidden: &'a HashSet<(u32, u32)>,
+    pub forbidden: &'a FxSet<(u32, u32)>,
     /// A swap must not create a triangle with a smaller angle than this (radians).
     pub min_angle: f64,
 }
 
 /// Swaps interior patch edges while that raises the smallest angle of the two
 /// triangles on the edge (the 3D max-min-angle criterion), never onto an existing
-/// edge, never folding the pair. Returns the number of swaps.
+/// edge, never folding the pair. A work queue of edges; the edges around a swapped
+/// pair are queued again. At most `max_swaps_per_triangle * triangles` swaps.
+/// Returns the number of swaps.
 pub fn swap_edges(
     pos: &[DVec3],
     tris: &mut [[u32; 3]],
     rules: &SwapRules,
-    max_passes: usize,
+    max_swaps_per_triangle: usize,
 ) -> usize {
-    let mut owner: HashMap<(u32, u32), usize> = HashMap::with_capacity(tris.len() * 3);
+    let mut owner: FxMap<(u32, u32), usize> = FxMap::default();
+    owner.reserve(tris.len() * 3);
     for (ti, t) in tris.iter().enumerate() {
         for c in 0..3 {
             owner.insert((t[c], t[(c + 1) % 3]), ti);
         }
     }
-    let mut swaps = 0;
-    for _ in 0..max_passes {
-        let mut changed = false;
-        for t1 in 0..tris.len() {
-            for c in 0..3 {
-                let tr = tris[t1];
-                let (a, b) = (tr[c], tr[(c + 1) % 3]);
-                let Some(&t2) = owner.get(&(b, a)) else {
-                    continue;
-                };
-                if t2 == t1 {
-                    continue;
-                }
-                let cc = tr[(c + 2) % 3];
-                let Some(d) = tris[t2].iter().copied().find(|&x| x != a && x != b) else {
-                    continue;
-                };
-                if cc == d || owner.contains_key(&(cc, d)) || owner.contains_key(&(d, cc)) {
-                    continue;
-                }
-                let key = (cc.min(d), cc.max(d));
-                if (cc as usize) < rules.k
-                    && (d as usize) < rules.k
-                    && rules.forbidden.contains(&key)
-                {
-                    continue;
-                }
-                let (pa, pb, pc, pd) = (
-                    pos[a as usize],
-                    pos[b as usize],
-                    pos[cc as usize],
-                    pos[d as usize],
-                );
-                let old = min_angle(pa, pb, pc).min(min_angle(pb, pa, pd));
-                // new triangles (d, b, c) and (c, a, d)
-                let new = min_angle(pd, pb, pc).min(min_angle(pc, pa, pd));
-                let better = new > old + 1e-9;
-                if !better || new < rules.min_angle {
-                    continue;
-                }
-                let n1 = unit_normal(pa, pb, pc);
-                let n2 = unit_normal(pb, pa, pd);
-                let m1 = unit_normal(pd, pb, pc);
-                let m2 = unit_normal(pc, pa, pd);
-                let avg = n1 + n2;
-                // no flipped triangle, no sharper crease than before (or than 30 degrees)
-                if m1.dot(avg) <= 0.0 || m2.dot(avg) <= 0.0 || m1.dot(m2) < n1.dot(n2).min(0.866) {
-                    continue;
-                }
-                tris[t1] = [d, b, cc];
-                tris[t2] = [cc, a, d];
-                owner.remove(&(a, b));
-                owner.remove(&(b, a));
-                for t in [t1, t2] {
-                    let tt = tris[t];
-                    for e in 0..3 {
-                        owner.insert((tt[e], tt[(e + 1) % 3]), t);
-                    }
-                }
-                swaps += 1;
-                changed = true;
+    let mut queue: Vec<(u32, u32)> = Vec::with_capacity(tris.len() * 3);
+    for t in tris.iter() {
+        for c in 0..3 {
+            let (a, b) = (t[c], t[(c + 1) % 3]);
+            if a < b && owner.contains_key(&(b, a)) {
+                queue.push((a, b));
             }
         }
-        if !changed {
+    }
+    let cap = max_swaps_per_triangle.saturating_mul(tris.len());
+    let min_sin = rules.min_angle.clamp(0.0, PI / 3.0).sin();
+    let mut swaps = 0;
+    while let Some((a, b)) = queue.pop() {
+        if swaps >= cap {
             break;
         }
+        let (Some(&t1), Some(&t2)) = (owner.get(&(a, b)), owner.get(&(b, a))) else {
+            continue;
+        };
+        if t1 == t2 {
+            continue;
+        }
+        let Some(cc) = tris[t1].iter().copied().find(|&x| x != a && x != b) else {
+            continue;
+        };
+        let Some(d) = tris[t2].iter().copied().find(|&x| x != a && x != b) else {
+            continue;
+        };
+        if cc == d || owner.contains_key(&(cc, d)) || owner.contains_key(&(d, cc)) {
+            continue;
+        }
+        let key = (cc.min(d), cc.max(d));
+        if (cc as usize) < rules.k && (d as usize) < rules.k && rules.forbidden.contains(&key) {
+            continue;
+        }
+        let (pa, pb, pc, pd) = (
+            pos[a as usize],
+            pos[b as usize],
+            pos[cc as usize],
+            pos[d as usize],
+        );
+        let old = min_angle_sin(pa, pb, pc).min(min_angle_sin(pb, pa, pd));
+        // new triangles (d, b, c) and (c, a, d)
+        let new = min_angle_sin(pd, pb, pc).min(min_angle_sin(pc, pa, pd));
+        let better = new > old + 1e-9;
+        if !better || new < min_sin {
+            continue;
+        }
+        let n1 = unit_normal(pa, pb, pc);
+        let n2 = unit_normal(pb, pa, pd);
+        let m1 = unit_normal(pd, pb, pc);
+        let m2 = unit_normal(pc, pa, pd);
+        let avg = n1 + n2;
+        // no flipped triangle, no sharper crease than before (or than 30 degrees)
+        if m1.dot(avg) <= 0.0 || m2.dot(avg) <= 0.0 || m1.dot(m2) < n1.dot(n2).min(0.866) {
+            continue;
+        }
+        tris[t1] = [d, b, cc];
+        tris[t2] = [cc, a, d];
+        owner.remove(&(a, b));
+        owner.remove(&(b, a));
+        for t in [t1, t2] {
+            let tt = tris[t];
+            for e in 0..3 {
+                owner.insert((tt[e], tt[(e + 1) % 3]), t);
+            }
+        }
+        for (x, y) in [(a, d), (d, b), (b, cc), (cc, a)] {
+            if owner.contains_key(&(y, x)) {
+                queue.push((x.min(y), x.max(y)));
+            }
+        }
+        swaps += 1;
     }
     swaps
 }
@@ -128,6 +213,7 @@ pub fn relax(
     if n <= k {
         return;
     }
+    let floor_sin = floor.clamp(0.0, PI / 3.0).sin();
     let mut nbrs: Vec<Vec<u32>> = vec![Vec::new(); n - k];
     let mut inc: Vec<Vec<usize>> = vec![Vec::new(); n - k];
     for (ti, t) in tris.iter().enumerate() {
@@ -164,8 +250,11 @@ pub fn relax(
                 });
                 let nb0 = geom::tri_normal_raw(before[0], before[1], before[2]);
                 let nb1 = geom::tri_normal_raw(after[0], after[1], after[2]);
-                nb0.dot(nb1) > 0.5 * nb0.length() * nb1.length()
-                    && min_angle(after[0], after[1], after[2]) >= floor.min(min_angle_of(&before))
+                if nb0.dot(nb1) <= 0.5 * nb0.length() * nb1.length() {
+                    return false;
+                }
+                let s1 = min_angle_sin(after[0], after[1], after[2]);
+                s1 >= floor_sin || s1 >= min_angle_sin(before[0], before[1], before[2])
             });
             if ok {
                 pos[v] = cand;
@@ -174,13 +263,21 @@ pub fn relax(
     }
 }
 
-fn min_angle_of(t: &[DVec3; 3]) -> f64 {
-    min_angle(t[0], t[1], t[2])
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn min_angle_and_its_sine_agree() {
+        let a = DVec3::new(0.0, 0.0, 0.0);
+        let b = DVec3::new(3.0, 0.2, 0.1);
+        let c = DVec3::new(0.4, 1.0, -0.3);
+        let g = geom::angles(a, b, c);
+        let m = g[0].min(g[1]).min(g[2]);
+        assert!((min_angle(a, b, c) - m).abs() < 1e-12);
+        assert!((min_angle_sin(a, b, c) - m.sin()).abs() < 1e-12);
+        assert_eq!(min_angle_sin(a, a, c), 0.0);
+    }
 
     #[test]
     fn swap_fixes_a_bad_diagonal() {
@@ -192,7 +289,7 @@ mod tests {
             DVec3::new(1.0, -0.4, 0.0),
         ];
         let mut tris = vec![[0, 1, 2], [1, 0, 3]];
-        let forbidden = HashSet::new();
+        let forbidden = FxSet::default();
         let rules = SwapRules {
             k: 0,
             forbidden: &forbidden,
@@ -208,7 +305,7 @@ mod tests {
         assert!(e.contains(&(2, 3)) && !e.contains(&(0, 1)));
         // forbidding the new diagonal prevents the swap
         let mut tris = vec![[0, 1, 2], [1, 0, 3]];
-        let forbidden: HashSet<(u32, u32)> = [(2, 3)].into_iter().collect();
+        let forbidden: FxSet<(u32, u32)> = [(2, 3)].into_iter().collect();
         let rules = SwapRules {
             k: 4,
             forbidden: &forbidden,

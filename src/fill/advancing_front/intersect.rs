@@ -9,9 +9,9 @@
 //! a crossing) survives the shrink unless it is thinner than `SHRINK` times the
 //! triangle size.
 
+use super::improve::FxMap;
 use glam::DVec3;
 use robust::{orient2d, orient3d, Coord, Coord3D};
-use std::collections::HashMap;
 
 /// Relative shrink applied before the exact test.
 pub const SHRINK: f64 = 1e-6;
@@ -148,6 +148,59 @@ fn seg_tri(a: DVec3, b: DVec3, t: &[DVec3; 3]) -> bool {
     (s1 >= 0 && s2 >= 0 && s3 >= 0) || (s1 <= 0 && s2 <= 0 && s3 <= 0)
 }
 
+/// Floating-point separating-axis filter: true only when some axis (the two face
+/// normals, the nine edge-edge cross products, the six in-plane edge normals)
+/// separates the triangles by far more than the rounding error, so that the exact
+/// test is needed only for pairs that (nearly) touch.
+fn clearly_separated(p: &[DVec3; 3], q: &[DVec3; 3]) -> bool {
+    // work relative to one corner to keep the rounding error relative to the size
+    let o = p[0];
+    let a = p.map(|x| x - o);
+    let b = q.map(|x| x - o);
+    let ea = [a[1] - a[0], a[2] - a[1], a[0] - a[2]];
+    let eb = [b[1] - b[0], b[2] - b[1], b[0] - b[2]];
+    let na = ea[0].cross(ea[1]);
+    let nb = eb[0].cross(eb[1]);
+    let scale = a
+        .iter()
+        .chain(b.iter())
+        .fold(0.0f64, |m, x| m.max(x.abs().max_element()));
+    let sep = |axis: DVec3| -> bool {
+        let len = axis.length();
+        if !len.is_finite() || len <= 0.0 {
+            return false;
+        }
+        let tol = 1e-9 * scale * len;
+        let (mut amin, mut amax) = (f64::INFINITY, f64::NEG_INFINITY);
+        for x in &a {
+            let d = x.dot(axis);
+            amin = amin.min(d);
+            amax = amax.max(d);
+        }
+        let (mut bmin, mut bmax) = (f64::INFINITY, f64::NEG_INFINITY);
+        for x in &b {
+            let d = x.dot(axis);
+            bmin = bmin.min(d);
+            bmax = bmax.max(d);
+        }
+        bmin > amax + tol || amin > bmax + tol
+    };
+    if sep(na) || sep(nb) {
+        return true;
+    }
+    for u in &ea {
+        if sep(na.cross(*u)) {
+            return true;
+        }
+        for v in &eb {
+            if sep(u.cross(*v)) {
+                return true;
+            }
+        }
+    }
+    eb.iter().any(|v| sep(nb.cross(*v)))
+}
+
 /// Closed triangles intersect (exact; a degenerate triangle never intersects).
 pub fn tri_tri(p: &[DVec3; 3], q: &[DVec3; 3]) -> bool {
     let np = (p[1] - p[0]).cross(p[2] - p[0]);
@@ -155,6 +208,11 @@ pub fn tri_tri(p: &[DVec3; 3], q: &[DVec3; 3]) -> bool {
     if np == DVec3::ZERO || nq == DVec3::ZERO || !np.is_finite() || !nq.is_finite() {
         return false;
     }
+    !clearly_separated(p, q) && tri_tri_exact(p, q, np)
+}
+
+/// [`tri_tri`] without the floating-point filter.
+fn tri_tri_exact(p: &[DVec3; 3], q: &[DVec3; 3], np: DVec3) -> bool {
     let dq = [
         o3(p[0], p[1], p[2], q[0]),
         o3(p[0], p[1], p[2], q[1]),
@@ -189,7 +247,7 @@ pub fn tri_tri(p: &[DVec3; 3], q: &[DVec3; 3]) -> bool {
 /// A uniform hash grid of axis-aligned boxes (ids), for broad-phase queries.
 pub struct Grid {
     inv: f64,
-    cells: HashMap<(i64, i64, i64), Vec<u32>>,
+    cells: FxMap<(i64, i64, i64), Vec<u32>>,
     /// Boxes spanning too many cells: tested on every query.
     big: Vec<u32>,
 }
@@ -202,7 +260,7 @@ impl Grid {
     pub fn new(cell: f64) -> Grid {
         Grid {
             inv: 1.0 / cell,
-            cells: HashMap::new(),
+            cells: FxMap::default(),
             big: Vec::new(),
         }
     }
@@ -381,6 +439,40 @@ mod tests {
         // nearly flat neighbour on the other side of a shared edge
         let f = t([1., 0., 0.], [1., 1., 1e-9], [0., 1., 0.]);
         assert!(!overlap(&a, &f));
+    }
+
+    #[test]
+    fn filter_agrees_with_the_exact_test() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let mut hits = 0;
+        for i in 0..20000 {
+            let mut pt = |flat: bool| {
+                let z = if flat {
+                    0.0
+                } else {
+                    rng.random_range(-1.0..1.0)
+                };
+                DVec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), z)
+            };
+            let flat = i % 2 == 0;
+            let p = [pt(flat), pt(flat), pt(flat)];
+            let mut q = [pt(flat), pt(flat), pt(flat)];
+            if i % 3 == 0 {
+                q[0] = p[1]; // share a corner
+            }
+            for t in [(p, q), (shrink(&p), shrink(&q))] {
+                let np = (t.0[1] - t.0[0]).cross(t.0[2] - t.0[0]);
+                let nq = (t.1[1] - t.1[0]).cross(t.1[2] - t.1[0]);
+                if np == DVec3::ZERO || nq == DVec3::ZERO {
+                    continue;
+                }
+                let exact = tri_tri_exact(&t.0, &t.1, np);
+                assert_eq!(tri_tri(&t.0, &t.1), exact, "pair {i}");
+                hits += exact as usize;
+            }
+        }
+        assert!(hits > 1000);
     }
 
     #[test]

@@ -29,14 +29,18 @@
 //!   (uncorrected) normal. On a sphere of radius `R` with outward normals this is
 //!   `-1/R`.
 //! - **Placement (eqs. 9–10).** The new edge has length `l` = mean of the two front
-//!   edge lengths at `v_i` and lies in the plane spanned by `n_c` and the tangent
+//!   edge lengths at `v_i` (averaged with the size field, below) and lies in the plane spanned by `n_c` and the tangent
 //!   direction `t` (the bisector or trisector of `θ` in the tangent plane of `n_c`); its
 //!   angle `φ` to `n_c` is `cos φ = clamp(ω1 κ l/2 + ω2 s, -1, 1)`, where `s` is the
 //!   mean cosine between `n_c` and the two unit front edges (the slope of the front
 //!   against `n_c`; the paper's `n_cᵀ e'/|e'|²` term read as a dimensionless cosine). On
 //!   a sphere both terms equal `-l/(2R)`, which puts the new vertex on the sphere when
 //!   `n_c = n_i`. The new vertex is `v_o = v_i + l (cos φ n_c + sin φ t)` (the paper's
-//!   `v_o = e - v_i` is a typo).
+//!   `v_o = e - v_i` is a typo). Because `n_c` leans towards the hole's axis, new
+//!   vertices are placed below the tangent continuation of a convex surface: the raw
+//!   front flattens large curved holes (measured on a unit sphere: the largest radial
+//!   error is 0.66 of the flat cap's sag for a 58-vertex hole, 0.95 for a 204-vertex
+//!   one). That is the paper's design (converge fast); the fairing restores shape.
 //! - **Priority.** A binary heap keyed by `θ`, with lazy deletion. After a step only
 //!   the front vertices whose neighbours or normal changed are re-keyed; the wider
 //!   window of `n_e` makes other keys slightly stale, so a popped vertex is
@@ -49,20 +53,39 @@
 //!   one heap; a front of two vertices is closed, of three gets its last triangle.
 //! - **Validity.** A step is taken only if none of its triangles overlaps the patch
 //!   so far or the mesh near the hole (exact tri–tri tests on slightly shrunk
-//!   triangles, see [`intersect`]), none creates an edge that already exists (in the
+//!   triangles, see the `intersect` submodule), none creates an edge that already exists (in the
 //!   patch, or a mesh edge between two loop vertices), none has an angle below
 //!   `max(checks.min_angle_deg, 2°)`, none faces away from `n_c`, and none folds
 //!   back over the triangle behind the front edge it closes (> 120°). Otherwise the
 //!   fallbacks are tried (ear, bisector, bisector merged into the nearest front
 //!   vertex); if none is valid the vertex is set aside until its neighbourhood changes.
-//!   When every front vertex is set aside the method fails.
-//! - **Bounded.** At most `max_steps_per_vertex · k` steps, and the deadline is checked
-//!   every step.
+//!   When every front vertex is set aside, a front of at most 8 vertices is closed
+//!   around a new vertex at its centroid (if those triangles pass the same checks);
+//!   otherwise the method fails. A front of four vertices with no valid diagonal
+//!   tries the same centre vertex.
+//! - **Bounded.** At most `max_steps_per_vertex · k` steps (a step is one processed
+//!   front vertex, taken or set aside), the deadline is checked every step, and a
+//!   front that grows past `4k + 64` vertices is declared divergent (it spreads away
+//!   from the hole instead of closing, as on a sphere with more than a hemisphere
+//!   missing). Note that the steps a hole needs grow with its area: a round planar
+//!   hole needs about `k²/8` steps, so the default 200 steps per vertex limits round
+//!   holes to about 1,600 boundary vertices.
 //!
-//! After closing: an angle-improving edge-swap pass, and with `front.fair` a few
-//! iterations of umbrella smoothing of the new vertices (boundary fixed), then the
-//! swap pass again. The whole patch is verified against itself and the mesh at the
-//! end; a relaxed patch that fails is replaced by the unrelaxed one.
+//! After closing: an angle-improving edge-swap pass (max-min angle, never onto an
+//! existing edge, never folding a pair), then with `front.fair` the new vertices are
+//! relaxed (a few umbrella-smoothing iterations, the loop fixed, which evens out the
+//! triangles), then faired by `fill::fair::fair_patch` (the `[fair]` policy: the
+//! bi-Laplacian by default), which restores the curvature the raw front flattens,
+//! and the swap pass runs again.
+//! The whole patch is verified against itself and the mesh at the end; a faired
+//! patch that fails is replaced by the unfaired one.
+//!
+//! Size field (a reading): the step length `l` is the mean of the two front edges
+//! (the paper) averaged with a size carried by the vertices (loop vertex: mean
+//! length of its mesh edges; new vertex: mean of the three front vertices it grew
+//! from). With the paper's length alone the front shrinks step after step (a 90°
+//! bisector step makes front edges 0.77 `l` long) and a round hole got six times
+//! too many vertices.
 
 mod improve;
 mod intersect;
@@ -72,9 +95,10 @@ mod tests;
 use super::{geom, FillContext, FillError, Patch};
 use crate::mesh::VertexId;
 use glam::DVec3;
+use improve::FxSet;
 use intersect::{Grid, Obstacles};
 use std::cmp::Ordering;
-use std::collections::{BinaryHeap, HashMap, HashSet};
+use std::collections::{BinaryHeap, HashMap};
 use std::f64::consts::PI;
 
 /// Smallest angle (degrees) a step may create (at least the checks' minimum).
@@ -84,11 +108,19 @@ const STEP_MIN_ANGLE_DEG: f64 = 2.0;
 const FOLD_COS: f64 = -0.5;
 /// Key offset of a vertex set aside (larger than any angle).
 const BLOCKED: f64 = 10.0;
+/// The front has diverged when it holds more than this many times the loop's
+/// vertices (plus 64): it is spreading away instead of closing.
+const DIVERGE_FACTOR: usize = 4;
+/// A front of at most this many vertices on which every step failed is closed
+/// around a centre vertex when that is valid.
+const FAN_MAX: usize = 8;
 /// Umbrella relaxation: iterations and step.
 const RELAX_ITERATIONS: usize = 8;
 const RELAX_LAMBDA: f64 = 0.5;
-/// Edge-swap passes.
-const SWAP_PASSES: usize = 10;
+/// Relaxation never creates an angle below this (degrees) unless it was smaller already.
+const RELAX_MIN_ANGLE_DEG: f64 = 0.5;
+/// Edge swaps: at most this many per patch triangle.
+const SWAPS_PER_TRIANGLE: usize = 10;
 
 /// Fills the hole with the improved advancing front.
 pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
@@ -99,9 +131,25 @@ pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
         )));
     }
     let params = Params::from_policy(ctx)?;
+    let t0 = std::time::Instant::now();
     let mut b = Builder::new(ctx, params)?;
+    let t1 = std::time::Instant::now();
     b.run()?;
-    b.finish()
+    let t2 = std::time::Instant::now();
+    let steps = b.steps;
+    let patch = b.finish()?;
+    tracing::debug!(
+        hole = ctx.hole.id,
+        k,
+        steps,
+        new_vertices = patch.new_vertices.len(),
+        triangles = patch.triangles.len(),
+        setup_ms = (t1 - t0).as_secs_f64() * 1e3,
+        front_ms = (t2 - t1).as_secs_f64() * 1e3,
+        finish_ms = t2.elapsed().as_secs_f64() * 1e3,
+        "advancing front closed"
+    );
+    Ok(patch)
 }
 
 /// Validated parameters (angles in radians).
@@ -135,7 +183,12 @@ impl Params {
         if !(f.merge_distance >= 0.0 && f.merge_distance.is_finite()) {
             return bad("merge_distance must be a finite number >= 0");
         }
-        let min_deg = ctx.policy.checks.min_angle_deg.max(STEP_MIN_ANGLE_DEG);
+        // no triangle has a smallest angle above 60 degrees
+        let min_deg = ctx
+            .policy
+            .checks
+            .min_angle_deg
+            .clamp(STEP_MIN_ANGLE_DEG, 60.0);
         Ok(Params {
             angle_small: f.angle_small.to_radians(),
             angle_large: f.angle_large.to_radians(),
@@ -237,8 +290,8 @@ struct Builder<'a> {
     size: Vec<f64>,
     hole_normal: DVec3,
     tris: Vec<[u32; 3]>,
-    edges: HashSet<(u32, u32)>,
-    forbidden: HashSet<(u32, u32)>,
+    edges: FxSet<(u32, u32)>,
+    forbidden: FxSet<(u32, u32)>,
     nodes: Vec<Node>,
     front_size: Vec<usize>,
     alive: usize,
@@ -249,6 +302,8 @@ struct Builder<'a> {
     obstacles: Obstacles,
     cell: f64,
     steps: usize,
+    applied: usize,
+    set_aside: usize,
 }
 
 #[inline]
@@ -296,7 +351,7 @@ impl<'a> Builder<'a> {
             return failed("cannot orient the hole (no loop or vertex normal)");
         }
         // mesh edges between loop vertices that are not loop edges
-        let mut forbidden = HashSet::new();
+        let mut forbidden = FxSet::default();
         for (i, &v) in hole.iter().enumerate() {
             for w in mesh.topo.neighbors(v) {
                 if let Some(&j) = index.get(&w) {
@@ -307,7 +362,8 @@ impl<'a> Builder<'a> {
                 }
             }
         }
-        let mut edges = HashSet::with_capacity(k * 8);
+        let mut edges = FxSet::default();
+        edges.reserve(k * 8);
         for i in 0..k {
             edges.insert(ekey(i as u32, ((i + 1) % k) as u32));
         }
@@ -390,6 +446,8 @@ impl<'a> Builder<'a> {
             obstacles,
             cell,
             steps: 0,
+            applied: 0,
+            set_aside: 0,
         })
     }
 
@@ -592,7 +650,7 @@ impl<'a> Builder<'a> {
         let mut normals = Vec::with_capacity(tris.len());
         for t in &tris {
             let [a, b, c] = t.map(at);
-            if improve::min_angle(a, b, c) < self.p.min_angle {
+            if improve::min_angle_sin(a, b, c) < self.p.min_angle.sin() {
                 return None;
             }
             let nr = geom::tri_normal_raw(a, b, c).normalize_or_zero();
@@ -853,7 +911,7 @@ impl<'a> Builder<'a> {
                 self.link(prev, n);
                 let total = self.front_size[f as usize] + m - 1; // -1 (x) + (m-1) new + 1 (w2)
                 let f2 = self.front_size.len() as u32;
-                let (small, size) = self.smaller_loop(w, w2);
+                let (small, size) = self.smaller_loop(w, w2)?;
                 let mut c = small;
                 loop {
                     self.nodes[c as usize].front = f2;
@@ -863,7 +921,10 @@ impl<'a> Builder<'a> {
                     }
                 }
                 self.front_size.push(size);
-                self.front_size[f as usize] = total - size;
+                self.front_size[f as usize] = match total.checked_sub(size) {
+                    Some(x) => x,
+                    None => return failed("internal: front sizes out of step"),
+                };
                 fronts.push(f2);
             }
         }
@@ -884,20 +945,19 @@ impl<'a> Builder<'a> {
 
     /// Walks the loops through `a` and `b` in turn; returns the start and size of the
     /// one that closes first (cost: twice the smaller size).
-    fn smaller_loop(&self, a: u32, b: u32) -> (u32, usize) {
+    fn smaller_loop(&self, a: u32, b: u32) -> Result<(u32, usize), FillError> {
         let (mut ca, mut cb) = (a, b);
-        let mut n = 0usize;
-        loop {
-            n += 1;
+        for n in 1..=self.nodes.len() {
             ca = self.nodes[ca as usize].next;
             if ca == a {
-                return (a, n);
+                return Ok((a, n));
             }
             cb = self.nodes[cb as usize].next;
             if cb == b {
-                return (b, n);
+                return Ok((b, n));
             }
         }
+        failed("internal: a front is not a closed loop")
     }
 
     fn front_nodes(&self, start: u32) -> Vec<u32> {
@@ -952,8 +1012,8 @@ impl<'a> Builder<'a> {
                     let g = pair.map(|t| t.map(|i| self.pos[i as usize]));
                     let n0 = geom::tri_normal_raw(g[0][0], g[0][1], g[0][2]);
                     let n1 = geom::tri_normal_raw(g[1][0], g[1][1], g[1][2]);
-                    let same_side = n0.dot(n1) > 0.0;
-                    if !same_side {
+                    let unfolded = n0.dot(n1) > FOLD_COS * n0.length() * n1.length();
+                    if !unfolded {
                         continue;
                     }
                     if g.iter().any(|t| {
@@ -975,7 +1035,9 @@ impl<'a> Builder<'a> {
                     }
                 }
                 let Some((_, pair)) = best else {
-                    return Ok(()); // left to the main loop
+                    // no diagonal: a centre vertex, else left to the main loop
+                    self.close_fan(start);
+                    return Ok(());
                 };
                 for t in pair {
                     self.emit(t);
@@ -986,6 +1048,57 @@ impl<'a> Builder<'a> {
             self.kill(c);
         }
         Ok(())
+    }
+
+    /// Closes the front through `start` with a new vertex at its centroid joined to
+    /// every front edge, if all those triangles pass the step checks. Returns whether
+    /// it did.
+    fn close_fan(&mut self, start: u32) -> bool {
+        let ns = self.front_nodes(start);
+        let m = ns.len();
+        if m < 3 || m != self.front_size[self.nodes[start as usize].front as usize] {
+            return false;
+        }
+        let vs: Vec<u32> = ns.iter().map(|&c| self.nodes[c as usize].v).collect();
+        let pts: Vec<DVec3> = vs.iter().map(|&v| self.pos[v as usize]).collect();
+        let c = geom::centroid(&pts);
+        let mut up = vs.iter().map(|&v| self.vnormal(v)).sum::<DVec3>();
+        if up == DVec3::ZERO {
+            up = geom::newell_normal(&pts);
+        }
+        let min_sin = self.p.min_angle.sin();
+        let mut geo = Vec::with_capacity(m);
+        for j in 0..m {
+            let t = [pts[j], pts[(j + 1) % m], c];
+            let nr = geom::tri_normal_raw(t[0], t[1], t[2]).normalize_or_zero();
+            let behind = self.nodes[ns[j] as usize].behind;
+            if improve::min_angle_sin(t[0], t[1], t[2]) < min_sin
+                || nr.dot(up) <= 0.0
+                || nr.dot(behind) < FOLD_COS
+            {
+                return false;
+            }
+            geo.push(t);
+        }
+        for (i, g) in geo.iter().enumerate() {
+            if self.obstacles.find_overlap(g, |_| false).is_some()
+                || geo[i + 1..].iter().any(|h| intersect::overlap(g, h))
+            {
+                return false;
+            }
+        }
+        let id = self.pos.len() as u32;
+        let size = vs.iter().map(|&v| self.size[v as usize]).sum::<f64>() / m as f64;
+        self.pos.push(c);
+        self.acc.push(DVec3::ZERO);
+        self.size.push(size);
+        for j in 0..m {
+            self.emit([vs[j], vs[(j + 1) % m], id]);
+        }
+        for n in ns {
+            self.kill(n);
+        }
+        true
     }
 
     fn rekey(&mut self, x: u32) {
@@ -1020,6 +1133,11 @@ impl<'a> Builder<'a> {
                 continue;
             }
             if nd.blocked {
+                // every vertex is set aside: close a small front around a centre vertex
+                let f = nd.front as usize;
+                if self.front_size[f] <= FAN_MAX && self.close_fan(e.node) {
+                    continue;
+                }
                 return failed(format!(
                     "the front is stuck: no valid step at any of its {} vertices",
                     self.alive
@@ -1028,8 +1146,12 @@ impl<'a> Builder<'a> {
             self.steps += 1;
             if self.steps > self.p.max_steps {
                 return failed(format!(
-                    "front did not close after {} steps",
-                    self.p.max_steps
+                    "front did not close after {} steps ({} taken, {} set aside; {} triangles, {} front vertices left)",
+                    self.p.max_steps,
+                    self.applied,
+                    self.set_aside,
+                    self.tris.len(),
+                    self.alive
                 ));
             }
             let ev = self.eval(e.node);
@@ -1048,11 +1170,21 @@ impl<'a> Builder<'a> {
                 }
             }
             match self.try_steps(e.node, &ev) {
-                Some(plan) => self.apply(plan)?,
+                Some(plan) => {
+                    self.applied += 1;
+                    self.apply(plan)?;
+                    if self.alive > DIVERGE_FACTOR * self.k + 64 {
+                        return failed(format!(
+                            "the front diverges: {} front vertices from a loop of {} after {} steps",
+                            self.alive, self.k, self.steps
+                        ));
+                    }
+                }
                 None => {
                     let nd = &mut self.nodes[e.node as usize];
                     nd.version = nd.version.wrapping_add(1);
                     nd.blocked = true;
+                    self.set_aside += 1;
                     self.heap.push(Entry {
                         key: ev.theta + BLOCKED,
                         node: e.node,
@@ -1091,20 +1223,70 @@ impl<'a> Builder<'a> {
         };
         let raw_tris = self.tris.clone();
         let mut tris = self.tris.clone();
-        improve::swap_edges(&self.pos, &mut tris, &rules, SWAP_PASSES);
+        let t = std::time::Instant::now();
+        let n_swaps = improve::swap_edges(&self.pos, &mut tris, &rules, SWAPS_PER_TRIANGLE);
+        tracing::debug!(
+            ms = t.elapsed().as_secs_f64() * 1e3,
+            n_swaps,
+            "advancing front: swaps"
+        );
+        self.ctx.deadline.check()?;
         let mut candidates: Vec<(Vec<DVec3>, Vec<[u32; 3]>)> = Vec::new();
         if self.p.fair {
-            // Switch to `super::fair::fair_patch` here once it lands.
-            let mut pos = self.pos.clone();
-            relax(&mut pos, k, &tris, rules.min_angle);
-            let mut t2 = tris.clone();
-            improve::swap_edges(&pos, &mut t2, &rules, SWAP_PASSES);
-            candidates.push((pos, t2));
+            // umbrella relaxation evens out the triangles, then the fairing solve
+            // (`fill::fair`, the `[fair]` policy) gives the patch its shape
+            let mut patch = Patch {
+                new_vertices: self.pos[k..].to_vec(),
+                triangles: tris.clone(),
+            };
+            let t = std::time::Instant::now();
+            let faired = relax(
+                self.ctx.mesh,
+                self.ctx.hole,
+                &mut patch,
+                &self.ctx.policy.fair,
+            )
+            .and_then(|()| {
+                super::fair::fair_patch(
+                    self.ctx.mesh,
+                    self.ctx.hole,
+                    &mut patch,
+                    &self.ctx.policy.fair,
+                )
+            });
+            match faired {
+                Ok(()) if patch.new_vertices.len() == self.pos.len() - k => {
+                    let mut pos = self.pos.clone();
+                    pos[k..].copy_from_slice(&patch.new_vertices);
+                    let mut t2 = patch.triangles;
+                    improve::swap_edges(&pos, &mut t2, &rules, SWAPS_PER_TRIANGLE);
+                    candidates.push((pos, t2));
+                }
+                Ok(()) => {
+                    tracing::debug!("advancing front: fairing changed the vertex count; not used")
+                }
+                Err(FillError::Timeout) => return Err(FillError::Timeout),
+                Err(FillError::Failed(why)) => {
+                    tracing::debug!(%why, "advancing front: fairing failed; not used")
+                }
+            }
+            tracing::debug!(
+                ms = t.elapsed().as_secs_f64() * 1e3,
+                "advancing front: fairing"
+            );
         }
         candidates.push((self.pos.clone(), tris));
         candidates.push((self.pos.clone(), raw_tris));
         for (pos, tris) in candidates {
-            if self.patch_is_clean(&pos, &tris) {
+            self.ctx.deadline.check()?;
+            let t = std::time::Instant::now();
+            let clean = self.patch_is_clean(&pos, &tris);
+            tracing::debug!(
+                ms = t.elapsed().as_secs_f64() * 1e3,
+                clean,
+                "advancing front: patch verified"
+            );
+            if clean {
                 return Ok(Patch {
                     new_vertices: pos[k..].to_vec(),
                     triangles: tris,
@@ -1115,8 +1297,33 @@ impl<'a> Builder<'a> {
     }
 }
 
-/// Local stand-in for the patch fairing: umbrella smoothing of the new vertices with
-/// the loop fixed (see [`improve::relax`]).
-fn relax(pos: &mut [DVec3], k: usize, tris: &[[u32; 3]], min_angle: f64) {
-    improve::relax(pos, k, tris, RELAX_ITERATIONS, RELAX_LAMBDA, min_angle);
+/// A few iterations of umbrella smoothing of the new vertices, the loop fixed (see
+/// [`improve::relax`]), before the fairing solve.
+fn relax(
+    mesh: &crate::mesh::Mesh,
+    hole: &super::Hole,
+    patch: &mut Patch,
+    _opts: &crate::policy::Fair,
+) -> Result<(), FillError> {
+    let k = hole.len();
+    let mut pos: Vec<DVec3> = hole.vertices.iter().map(|&v| mesh.pos(v)).collect();
+    pos.extend_from_slice(&patch.new_vertices);
+    if patch
+        .triangles
+        .iter()
+        .flatten()
+        .any(|&i| i as usize >= pos.len())
+    {
+        return failed("patch index out of range");
+    }
+    improve::relax(
+        &mut pos,
+        k,
+        &patch.triangles,
+        RELAX_ITERATIONS,
+        RELAX_LAMBDA,
+        RELAX_MIN_ANGLE_DEG.to_radians(),
+    );
+    patch.new_vertices.copy_from_slice(&pos[k..]);
+    Ok(())
 }

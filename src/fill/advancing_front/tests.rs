@@ -381,6 +381,7 @@ fn planar_circular_hole_in_a_grid_stays_planar() {
             assert!((DVec2::new(p.x, p.y) - DVec2::new(15.0, 15.0)).length() < 9.5);
         }
         assert!(s.q_good >= 0.8, "q share {}", s.q_good);
+        assert!(s.valence6 >= 0.6, "valence-6 share {}", s.valence6);
     }
 }
 
@@ -453,6 +454,64 @@ fn tiny_loops_three_and_four() {
     }
 }
 
+/// A quad hole whose one diagonal is already a mesh edge (on a triangular
+/// bipyramid with two faces around a polar edge removed): the other one is used.
+#[test]
+fn never_duplicates_a_mesh_edge_between_loop_vertices() {
+    let h = 3f64.sqrt() / 2.0;
+    let raw = RawMesh {
+        positions: vec![
+            DVec3::new(1.0, 0.0, 0.0),  // a
+            DVec3::new(-0.5, h, 0.0),   // b
+            DVec3::new(-0.5, -h, 0.0),  // c
+            DVec3::new(0.0, 0.0, 1.0),  // t
+            DVec3::new(0.0, 0.0, -1.0), // u
+        ],
+        // (a,b,t) and (b,c,t) removed
+        faces: vec![[2, 0, 3], [1, 0, 4], [2, 1, 4], [0, 2, 4]],
+        ..Default::default()
+    };
+    let (mesh, _) = Mesh::from_raw(&raw);
+    mesh.validate().unwrap();
+    let lp = mesh.topo.boundary_loops().pop().unwrap();
+    assert_eq!(lp.len(), 4);
+    let (hole, r) = run(&mesh, &lp, &Policy::default());
+    let patch = r.unwrap();
+    validate(&mesh, &hole, &patch);
+    let ids: Vec<u32> = patch
+        .triangles
+        .iter()
+        .flatten()
+        .map(|&i| lp[i as usize].0)
+        .collect();
+    // the diagonal b-t (1-3) is used, a-c (0-2) is not
+    let has = |x: u32, y: u32| {
+        patch.triangles.iter().any(|t| {
+            let v: Vec<u32> = t.iter().map(|&i| lp[i as usize].0).collect();
+            v.contains(&x) && v.contains(&y)
+        })
+    };
+    assert!(has(1, 3) && !has(0, 2), "{ids:?}");
+}
+
+/// Through the dispatcher: a large hole goes to the advancing front, whose patch
+/// passes the checks and is applied.
+#[test]
+fn dispatcher_fills_a_large_hole_with_the_front() {
+    use crate::check::Checker;
+    use crate::policy::Method;
+    use crate::report::HoleStatus;
+    let (mut mesh, lp) = grid_with_hole(30, |c| (c - DVec3::new(15.0, 15.0, 0.0)).length() < 9.0);
+    let policy = Policy::default();
+    let hole = Hole::new(0, &mesh, lp, &policy);
+    let mut checker = Checker::new(&mesh);
+    let rep = crate::fill::fill_hole(&mut mesh, &hole, &policy, &mut checker);
+    assert_eq!(rep.status, HoleStatus::Filled, "{}", rep.reason);
+    assert_eq!(rep.method, Some(Method::AdvancingFront));
+    mesh.validate().unwrap();
+    assert_eq!(mesh.topo.boundary_loops().len(), 1);
+}
+
 // ----- curved -----------------------------------------------------------------------
 
 /// The raw front follows the paper's placement: new vertices near the plane of the
@@ -516,6 +575,7 @@ fn sphere_case(
             "a new vertex lies {out} outside the sphere"
         );
         assert!(s.q_good >= 0.8, "q share {}", s.q_good);
+        assert!(s.valence6 >= 0.6, "valence-6 share {}", s.valence6);
     }
 }
 
@@ -666,6 +726,158 @@ fn nearly_self_touching_c_loop() {
     assert!(filled_or_clean_error("C", &mesh, &lp), "the C should fill");
 }
 
+/// More than a hemisphere missing: the loop is smaller than the hole behind it (the
+/// paper's divergent case).
+#[test]
+fn divergent_sphere_hole() {
+    let (mesh, lp) = sphere_with_hole(4, 2.0);
+    filled_or_clean_error("divergent sphere", &mesh, &lp);
+}
+
+/// Unit cube `[0, 1]³` with `n x n` cells per face, with the faces whose centroid is
+/// within `r` of the corner (1, 1, 1) removed.
+fn cube_with_corner_hole(n: usize, r: f64) -> (Mesh, Vec<VertexId>) {
+    let mut raw = RawMesh::default();
+    let mut index: std::collections::HashMap<(i64, i64, i64), u32> = Default::default();
+    let mut vid = |p: DVec3, raw: &mut RawMesh| -> u32 {
+        let key = (
+            (p.x * 1e6).round() as i64,
+            (p.y * 1e6).round() as i64,
+            (p.z * 1e6).round() as i64,
+        );
+        *index.entry(key).or_insert_with(|| {
+            raw.positions.push(p);
+            (raw.positions.len() - 1) as u32
+        })
+    };
+    // each face: origin, two axes (u x v points outwards)
+    let faces = [
+        (DVec3::new(1.0, 0.0, 0.0), DVec3::Y, DVec3::Z),
+        (DVec3::new(0.0, 0.0, 0.0), DVec3::Z, DVec3::Y),
+        (DVec3::new(0.0, 1.0, 0.0), DVec3::Z, DVec3::X),
+        (DVec3::new(0.0, 0.0, 0.0), DVec3::X, DVec3::Z),
+        (DVec3::new(0.0, 0.0, 1.0), DVec3::X, DVec3::Y),
+        (DVec3::new(0.0, 0.0, 0.0), DVec3::Y, DVec3::X),
+    ];
+    let corner = DVec3::ONE;
+    for (o, u, v) in faces {
+        for j in 0..n {
+            for i in 0..n {
+                let p =
+                    |a: usize, b: usize| o + u * (a as f64 / n as f64) + v * (b as f64 / n as f64);
+                let q = [p(i, j), p(i + 1, j), p(i + 1, j + 1), p(i, j + 1)];
+                for t in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
+                    let c = (t[0] + t[1] + t[2]) / 3.0;
+                    if (c - corner).length() < r {
+                        continue;
+                    }
+                    let f = [
+                        vid(t[0], &mut raw),
+                        vid(t[1], &mut raw),
+                        vid(t[2], &mut raw),
+                    ];
+                    raw.faces.push(f);
+                }
+            }
+        }
+    }
+    let (mesh, rep) = Mesh::from_raw(&raw);
+    assert_eq!(rep.flipped_faces, 0);
+    mesh.validate().unwrap();
+    let loops = mesh.topo.boundary_loops();
+    assert_eq!(loops.len(), 1);
+    (mesh, loops.into_iter().next().unwrap())
+}
+
+/// A hole over a cube corner: three faces meeting at right angles.
+#[test]
+fn cube_corner_hole() {
+    let (mesh, lp) = cube_with_corner_hole(24, 0.6);
+    assert!(lp.len() > 50, "loop of {}", lp.len());
+    assert!(
+        filled_or_clean_error("cube corner", &mesh, &lp),
+        "the corner should fill"
+    );
+}
+
+/// A hole in a height field `z = f(x, y)`; the patch stays within the range of the
+/// surface heights around the loop, widened by the amplitude.
+#[test]
+fn saddle_hole() {
+    let poly = circle(64, 4.0, DVec2::ZERO);
+    let (mut mesh, lp) = planar_with_hole(&poly, 0.4, -7.0, 7.0);
+    let f = |x: f64, y: f64| 0.05 * (x * x - y * y);
+    for p in mesh.positions.iter_mut() {
+        p.z = f(p.x, p.y);
+    }
+    let (hole, r) = run(&mesh, &lp, &Policy::default());
+    let patch = r.unwrap();
+    let s = validate(&mesh, &hole, &patch);
+    report("saddle", lp.len(), &s);
+    for p in &patch.new_vertices {
+        // the saddle spans [-0.8, 0.8] over the disk
+        assert!(p.z.abs() <= 0.85, "z = {}", p.z);
+        assert!(DVec2::new(p.x, p.y).length() < 4.2);
+    }
+    assert!(s.q_good >= 0.8, "q share {}", s.q_good);
+}
+
+/// A zero-area slit (a cut along a grid line): no valid patch exists, so a clean
+/// error.
+#[test]
+fn slit_gives_a_clean_error() {
+    let n = 8;
+    let mut raw = RawMesh::default();
+    for j in 0..=n {
+        for i in 0..=n {
+            raw.positions.push(DVec3::new(i as f64, j as f64, 0.0));
+        }
+    }
+    let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
+    // copies of (2..=6, 4) for the faces above the cut
+    let base = raw.positions.len() as u32;
+    for i in 2..=6 {
+        raw.positions.push(DVec3::new(i as f64, 4.0, 0.0));
+    }
+    for j in 0..n {
+        for i in 0..n {
+            for f in [
+                [id(i, j), id(i + 1, j), id(i + 1, j + 1)],
+                [id(i, j), id(i + 1, j + 1), id(i, j + 1)],
+            ] {
+                let c = f.iter().map(|&v| raw.positions[v as usize]).sum::<DVec3>() / 3.0;
+                let f = f.map(|v| {
+                    let (vi, vj) = (v as usize % (n + 1), v as usize / (n + 1));
+                    if c.y > 4.0 && vj == 4 && (2..=6).contains(&vi) {
+                        base + (vi - 2) as u32
+                    } else {
+                        v
+                    }
+                });
+                raw.faces.push(f);
+            }
+        }
+    }
+    let (mesh, _) = Mesh::from_raw(&raw);
+    mesh.validate().unwrap();
+    let lp = mesh
+        .topo
+        .boundary_loops()
+        .into_iter()
+        .find(|l| l.len() != 4 * n)
+        .unwrap();
+    assert_eq!(lp.len(), 12);
+    let (hole, r) = run(&mesh, &lp, &Policy::default());
+    match r {
+        Err(FillError::Failed(why)) => eprintln!("slit: {why}"),
+        Ok(patch) => {
+            // only acceptable if it passes every check
+            validate(&mesh, &hole, &patch);
+        }
+        Err(e) => panic!("unexpected {e:?}"),
+    }
+}
+
 #[test]
 fn step_cap_gives_a_clean_error() {
     let (mesh, lp) = grid_with_hole(30, |c| (c - DVec3::new(15.0, 15.0, 0.0)).length() < 9.0);
@@ -702,7 +914,7 @@ fn bad_policy_is_an_error() {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 32, ..ProptestConfig::default() })]
     #[test]
     fn random_star_shaped_loops(radii in proptest::collection::vec(0.4f64..1.0, 5..14), rot in 0.0f64..std::f64::consts::TAU) {
         let n = radii.len();
@@ -723,6 +935,76 @@ proptest! {
                 for p in &patch.new_vertices {
                     prop_assert!(p.z.abs() < 1e-9);
                 }
+            }
+            Err(FillError::Failed(_)) => {}
+            Err(e) => prop_assert!(false, "unexpected {:?}", e),
+        }
+    }
+
+    /// Any policy in range: a valid disk or a clean error, on a curved loop.
+    #[test]
+    fn random_policies(alpha in 0.0f64..=1.0, omega1 in 0.0f64..=1.0, merge in 0.0f64..1.0,
+                       small in 30.0f64..100.0, extra in 0.0f64..80.0, fair in proptest::bool::ANY) {
+        let (mesh, lp) = sphere_with_hole(4, 0.5);
+        let mut policy = Policy::default();
+        policy.front.alpha = alpha;
+        policy.front.omega1 = omega1;
+        policy.front.merge_distance = merge;
+        policy.front.angle_small = small;
+        policy.front.angle_large = small + extra;
+        policy.front.fair = fair;
+        let (hole, r) = run(&mesh, &lp, &policy);
+        match r {
+            Ok(patch) => {
+                validate(&mesh, &hole, &patch);
+            }
+            Err(FillError::Failed(_)) => {}
+            Err(e) => prop_assert!(false, "unexpected {:?}", e),
+        }
+    }
+
+    /// A hole in a noisy sphere (radial noise up to `noise`): a valid disk or a
+    /// clean error.
+    #[test]
+    fn noisy_sphere_hole(seed in 0u64..1000, noise in 0.0f64..0.02) {
+        use rand::{Rng, SeedableRng};
+        let (mut mesh, lp) = sphere_with_hole(4, 0.55);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        for p in mesh.positions.iter_mut() {
+            *p *= 1.0 + rng.random_range(-noise..=noise);
+        }
+        let (hole, r) = run(&mesh, &lp, &Policy::default());
+        match r {
+            Ok(patch) => {
+                let s = validate(&mesh, &hole, &patch);
+                prop_assert!(s.q_good > 0.5);
+            }
+            Err(FillError::Failed(_)) => {}
+            Err(e) => prop_assert!(false, "unexpected {:?}", e),
+        }
+    }
+
+    /// Star-shaped loops on a wavy height field: a valid disk or a clean error.
+    #[test]
+    fn random_loops_on_a_wavy_surface(radii in proptest::collection::vec(0.4f64..1.0, 5..12), amp in 0.0f64..1.5, freq in 0.2f64..0.8) {
+        let n = radii.len();
+        let corners: Vec<DVec2> = radii
+            .iter()
+            .enumerate()
+            .map(|(i, r)| {
+                let a = 2.0 * PI * i as f64 / n as f64;
+                DVec2::new(a.cos(), a.sin()) * (r * 6.0)
+            })
+            .collect();
+        let poly = resample(&corners, 0.45);
+        let (mut mesh, lp) = planar_with_hole(&poly, 0.45, -8.0, 8.0);
+        for p in mesh.positions.iter_mut() {
+            p.z = amp * (freq * p.x).sin() * (freq * p.y).cos();
+        }
+        let (hole, r) = run(&mesh, &lp, &Policy::default());
+        match r {
+            Ok(patch) => {
+                validate(&mesh, &hole, &patch);
             }
             Err(FillError::Failed(_)) => {}
             Err(e) => prop_assert!(false, "unexpected {:?}", e),
