@@ -22,7 +22,8 @@ fn four_files_three_repaired_one_failed_daemon_alive() {
 
     assert!(
         wait_until(LONG, || f.models().len() == 3
-            && Folders::files(&f.failed).len() == 2),
+            && Folders::files(&f.failed).len() == 2
+            && Folders::files(&f.archive).len() == 3),
         "outbox {:?}, failed {:?}, inbox {:?}\n{}",
         Folders::files(&f.outbox),
         Folders::files(&f.failed),

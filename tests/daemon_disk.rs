@@ -85,6 +85,10 @@ fn full_outbox_never_loses_the_input_and_resumes() {
         d.log()
     );
     assert_eq!(f.models(), vec!["full.obj"]);
+    assert!(wait_until(Duration::from_secs(20), || f
+        .archive
+        .join("full.obj")
+        .is_file()));
     assert_eq!(fs::read_to_string(f.archive.join("full.obj")).unwrap(), obj);
     d.signal("TERM");
     assert_eq!(
