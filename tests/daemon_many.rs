@@ -65,8 +65,10 @@ fn two_daemons_200_files_each_repaired_exactly_once() {
         .all(|p| *p == a.pid() as u64 || *p == b.pid() as u64));
     eprintln!("files per daemon: {by:?}");
     // the journals agree: 200 "repaired" lines in all
-    let lines = a.log().matches(" repaired -> ").count() + b.log().matches(" repaired -> ").count();
-    assert_eq!(lines, n);
+    let lines =
+        || a.log().matches(" repaired -> ").count() + b.log().matches(" repaired -> ").count();
+    assert!(wait_until(Duration::from_secs(10), || lines() >= n));
+    assert_eq!(lines(), n);
 }
 
 #[test]
