@@ -30,8 +30,12 @@
 //!   For `uniform`/`fujiwara` weights the operator is normalised by the weight sum
 //!   instead (the umbrella operator), as in Taubin's and Kobbelt's work.
 //!
-//! The system matrix is not symmetric once normalised, so it is solved by sparse LU
-//! (faer), factored once for the three coordinates ([`FairSolver`]). A failed
+//! Each unknown's row is `M·Δ^c` (its own area factor dropped, which leaves the
+//! solution unchanged): `L M⁻¹ L …` with the symmetric cotangent matrix `L`, so the
+//! system is symmetric, and after negation for odd `c` positive definite; it is
+//! factored once by sparse Cholesky (faer) and solved for x, y and z
+//! ([`FairSolver`]). When a vertex fell back to uniform weights the matrix is not
+//! symmetric and sparse LU is used instead (also when Cholesky fails). A failed
 //! factorisation or a non-finite result is `FillError::Failed`.
 
 use super::{geom, FillError, Hole, Patch};
@@ -78,6 +82,8 @@ struct Operator {
     nbrs: Vec<Vec<(u32, f64)>>,
     sum: Vec<f64>,
     scale: Vec<f64>,
+    /// Every edge has the same weight seen from both ends.
+    symmetric: bool,
 }
 
 fn build_operator(local: &LocalMesh, weights: Weights, norm: Normalization) -> Operator {
@@ -131,6 +137,7 @@ fn build_operator(local: &LocalMesh, weights: Weights, norm: Normalization) -> O
     }
     let mut sum = vec![0.0; n];
     let mut scale = vec![1.0; n];
+    let mut symmetric = true;
     for v in 0..n {
         nbrs[v].sort_unstable_by_key(|e| e.0);
         let pv = p[v];
@@ -157,6 +164,9 @@ fn build_operator(local: &LocalMesh, weights: Weights, norm: Normalization) -> O
             }
         }
         if uniform {
+            if weights != Weights::Uniform {
+                symmetric = false;
+            }
             for e in nbrs[v].iter_mut() {
                 e.1 = 1.0;
             }
@@ -191,13 +201,24 @@ fn build_operator(local: &LocalMesh, weights: Weights, norm: Normalization) -> O
             }
         };
     }
-    Operator { nbrs, sum, scale }
+    Operator {
+        nbrs,
+        sum,
+        scale,
+        symmetric,
+    }
+}
+
+/// The factorisation: Cholesky when the system is symmetric positive definite, else LU.
+enum Factor {
+    Llt(faer::sparse::linalg::solvers::Llt<usize, f64>),
+    Lu(Box<faer::sparse::linalg::solvers::Lu<usize, f64>>),
 }
 
 /// Fairing system of one patch, factored once; [`FairSolver::solve`] gives the new
 /// positions of the unknowns for x, y and z.
 pub struct FairSolver {
-    lu: faer::sparse::linalg::solvers::Lu<usize, f64>,
+    factor: Factor,
     rhs: Mat<f64>,
     /// Local index of each unknown, in column order.
     unknowns: Vec<usize>,
@@ -243,7 +264,11 @@ impl FairSolver {
                 local,
                 op: &op,
             };
-            acc.expand(v, 1.0, continuity)?;
+            // row i of M·Δ^c (the outermost area factor dropped, which does not change
+            // the solution): L M⁻¹ L … is symmetric, and negated for odd c it is
+            // positive definite on the unknowns
+            let sign = if continuity % 2 == 1 { -1.0 } else { 1.0 };
+            acc.expand_row(v, sign, continuity)?;
             let r = acc.rhs;
             for (c, val) in r.iter().enumerate() {
                 rhs[(row, c)] = *val;
@@ -251,10 +276,27 @@ impl FairSolver {
         }
         let mat = SparseColMat::<usize, f64>::try_new_from_triplets(m, m, &triplets)
             .map_err(|e| FillError::Failed(format!("fairing matrix: {e:?}")))?;
-        let lu = mat
-            .sp_lu()
-            .map_err(|e| FillError::Failed(format!("fairing factorisation failed: {e:?}")))?;
-        Ok(FairSolver { lu, rhs, unknowns })
+        let llt = if op.symmetric {
+            mat.sp_cholesky(faer::Side::Lower).ok()
+        } else {
+            None
+        };
+        let factor = match llt {
+            Some(l) => Factor::Llt(l),
+            None => Factor::Lu(Box::new(mat.sp_lu().map_err(|e| {
+                FillError::Failed(format!("fairing factorisation failed: {e:?}"))
+            })?)),
+        };
+        Ok(FairSolver {
+            factor,
+            rhs,
+            unknowns,
+        })
+    }
+
+    /// True when the system was factored by Cholesky (symmetric), false for LU.
+    pub fn is_cholesky(&self) -> bool {
+        matches!(self.factor, Factor::Llt(_))
     }
 
     /// Number of unknowns.
@@ -277,7 +319,10 @@ impl FairSolver {
         if self.unknowns.is_empty() {
             return Ok(Vec::new());
         }
-        let x = self.lu.solve(self.rhs.as_ref());
+        let x = match &self.factor {
+            Factor::Llt(f) => f.solve(self.rhs.as_ref()),
+            Factor::Lu(f) => f.solve(self.rhs.as_ref()),
+        };
         let out: Vec<DVec3> = (0..self.unknowns.len())
             .map(|i| DVec3::new(x[(i, 0)], x[(i, 1)], x[(i, 2)]))
             .collect();
@@ -301,6 +346,21 @@ struct RowAcc<'a> {
 }
 
 impl RowAcc<'_> {
+    /// The row of `v`: `mult · Σ_u w_vu (Δ^(depth-1) x)_u - W_v (Δ^(depth-1) x)_v`,
+    /// without `v`'s own normalisation.
+    fn expand_row(&mut self, v: usize, mult: f64, depth: u8) -> Result<(), FillError> {
+        if self.op.nbrs[v].is_empty() {
+            return Err(FillError::Failed(format!(
+                "fairing: local vertex {v} has no neighbours"
+            )));
+        }
+        for i in 0..self.op.nbrs[v].len() {
+            let (u, w) = self.op.nbrs[v][i];
+            self.expand(u as usize, mult * w, depth - 1)?;
+        }
+        self.expand(v, -mult * self.op.sum[v], depth - 1)
+    }
+
     fn expand(&mut self, v: usize, mult: f64, depth: u8) -> Result<(), FillError> {
         if depth == 0 {
             if self.local.free[v] {
@@ -480,6 +540,31 @@ mod tests {
         fair_local(&mut m, 2, Weights::Uniform).unwrap();
         for p in &m.positions {
             assert!((p.z - f(p.x, p.y)).abs() < 1e-9, "{p}");
+        }
+    }
+
+    #[test]
+    fn degenerate_start_takes_the_lu_path_and_stays_exact() {
+        // a free vertex starting on top of its neighbour makes its triangles degenerate:
+        // it falls back to uniform weights, the system is no longer symmetric and is
+        // solved by LU; the solution still satisfies z = f(x, y) exactly, because the
+        // operator's rows sum to zero whatever the weights
+        let f = |x: f64, y: f64| 0.3 * x - 0.2 * y + 1.0;
+        for c in 1..=3u8 {
+            let mut m = grid(10, f);
+            let n = 10;
+            let v = 5 * (n + 1) + 5;
+            m.positions[v] = m.positions[v + 1];
+            let s = FairSolver::new(&m, c, Weights::Cotangent, Normalization::VoronoiArea).unwrap();
+            assert!(!s.is_cholesky());
+            let x = s.solve().unwrap();
+            for p in &x {
+                assert!((p.z - f(p.x, p.y)).abs() < 1e-9, "c={c} {p}");
+            }
+            let m2 = grid(10, f);
+            let s2 =
+                FairSolver::new(&m2, c, Weights::Cotangent, Normalization::VoronoiArea).unwrap();
+            assert!(s2.is_cholesky());
         }
     }
 

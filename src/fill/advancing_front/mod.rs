@@ -1247,12 +1247,11 @@ impl<'a> Builder<'a> {
                 &self.ctx.policy.fair,
             )
             .and_then(|()| {
-                super::fair::fair_patch(
-                    self.ctx.mesh,
-                    self.ctx.hole,
-                    &mut patch,
-                    &self.ctx.policy.fair,
-                )
+                // the first solve's cotangent weights come from the flat front; a
+                // second solve on the curved result gets them right
+                let (mesh, hole, fair) = (self.ctx.mesh, self.ctx.hole, &self.ctx.policy.fair);
+                super::fair::fair_patch(mesh, hole, &mut patch, fair)?;
+                super::fair::fair_patch(mesh, hole, &mut patch, fair)
             });
             match faired {
                 Ok(()) if patch.new_vertices.len() == self.pos.len() - k => {

@@ -18,10 +18,42 @@
 //! edge), when a new triangle would be degenerate, or when it would fold against the
 //! pair it replaces; a flip budget bounds the swapping on non-planar patches, where 3D
 //! Delaunay flips need not terminate.
+//!
+//! Not in the paper: [`Refiner::relax`], a light isotropic remeshing of the new
+//! vertices (interior edges longer than 1.6 times the local scale are split at their
+//! midpoint, flips bring valences toward 6, and each new vertex moves in its tangent
+//! plane toward the mean of the apexes that would make its triangles equilateral). Every
+//! operation is refused when it would create an angle below 15 degrees (or below what
+//! was there); loop vertices never move.
 
 use super::super::{Deadline, FillError};
 use glam::DVec3;
 use std::collections::{HashMap, HashSet};
+use std::hash::{BuildHasherDefault, Hasher};
+
+/// A fast hasher for the small integer keys of the edge map (the default SipHash
+/// dominated the refinement time).
+#[derive(Default)]
+pub struct EdgeHasher(u64);
+
+impl Hasher for EdgeHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(b as u64);
+        }
+    }
+    fn write_u32(&mut self, i: u32) {
+        self.write_u64(i as u64);
+    }
+    fn write_u64(&mut self, i: u64) {
+        self.0 = (self.0.rotate_left(5) ^ i).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+}
+
+type EdgeMap = HashMap<(u32, u32), u32, BuildHasherDefault<EdgeHasher>>;
 
 /// The patch during refinement.
 pub struct Refiner<'a> {
@@ -32,11 +64,34 @@ pub struct Refiner<'a> {
     /// Triangles over `pos`.
     pub tris: Vec<[u32; 3]>,
     /// Directed edge -> triangle.
-    edges: HashMap<(u32, u32), u32>,
+    edges: EdgeMap,
     k: usize,
     forbidden: &'a HashSet<(u32, u32)>,
     /// Relaxation uses valence flips (else Delaunay swaps).
     pub valence: bool,
+    /// Relaxation splits interior edges longer than this times the local scale (0: off).
+    pub split_ratio: f64,
+}
+
+/// Smallest angle (degrees) that relaxation, valence flips and long-edge splits may
+/// create; an operation that would go below it (and below what was there) is refused.
+const SLIVER_GUARD: f64 = 15.0;
+
+/// Smallest angle of a triangle (radians): the one opposite the shortest edge.
+fn min_angle(a: DVec3, b: DVec3, c: DVec3) -> f64 {
+    let mut l = [
+        (b - c).length_squared(),
+        (c - a).length_squared(),
+        (a - b).length_squared(),
+    ];
+    l.sort_unstable_by(|x, y| x.total_cmp(y));
+    let [s, m, g] = l;
+    if m.is_nan() || g.is_nan() || m <= 0.0 || g <= 0.0 {
+        return 0.0;
+    }
+    ((m + g - s) / (2.0 * (m * g).sqrt()))
+        .clamp(-1.0, 1.0)
+        .acos()
 }
 
 /// Hard cap on the refined patch size (a guard against absurd scales).
@@ -52,7 +107,7 @@ impl<'a> Refiner<'a> {
         forbidden: &'a HashSet<(u32, u32)>,
     ) -> Refiner<'a> {
         let k = pos.len();
-        let mut edges = HashMap::with_capacity(tris.len() * 3);
+        let mut edges = EdgeMap::with_capacity_and_hasher(tris.len() * 3, Default::default());
         for (t, tri) in tris.iter().enumerate() {
             for c in 0..3 {
                 edges.insert((tri[c], tri[(c + 1) % 3]), t as u32);
@@ -66,6 +121,7 @@ impl<'a> Refiner<'a> {
             k,
             forbidden,
             valence: true,
+            split_ratio: 1.6,
         }
     }
 
@@ -187,13 +243,10 @@ impl<'a> Refiner<'a> {
     /// smallest angle before and 15 degrees (a valence flip must not make slivers).
     fn flip_keeps_angles(&self, a: u32, b: u32, c: u32, d: u32) -> bool {
         let [pa, pb, pc, pd] = [a, b, c, d].map(|i| self.pos[i as usize]);
-        let min3 = |x: DVec3, y: DVec3, z: DVec3| {
-            let g = super::super::geom::angles(x, y, z);
-            g[0].min(g[1]).min(g[2])
-        };
+        let min3 = min_angle;
         let before = min3(pa, pb, pc).min(min3(pb, pa, pd));
         let after = min3(pc, pa, pd).min(min3(pd, pb, pc));
-        after >= before.min(15f64.to_radians())
+        after >= before.min(SLIVER_GUARD.to_radians())
     }
 
     fn do_flip(&mut self, a: u32, b: u32, (t1, t2, c, d): (u32, u32, u32, u32)) {
@@ -325,6 +378,128 @@ impl<'a> Refiner<'a> {
         Ok(flips)
     }
 
+    /// Splits every interior edge longer than `ratio` times the mean scale of its ends
+    /// at its midpoint (the isotropic-remeshing split; the paper's centroid splits
+    /// leave long chords across narrow holes, whose slivers no flip can mend).
+    /// Returns the number of splits.
+    pub fn split_long_edges(
+        &mut self,
+        ratio: f64,
+        deadline: &Deadline,
+    ) -> Result<usize, FillError> {
+        let mut keys: Vec<(u32, u32)> = self
+            .edges
+            .keys()
+            .copied()
+            .filter(|&(a, b)| a < b && self.edges.contains_key(&(b, a)))
+            .collect();
+        keys.sort_unstable();
+        let mut count = 0;
+        for (i, (a, b)) in keys.into_iter().enumerate() {
+            if i % 4096 == 0 {
+                deadline.check()?;
+            }
+            let (Some(&t1), Some(&t2)) = (self.edges.get(&(a, b)), self.edges.get(&(b, a))) else {
+                continue;
+            };
+            let (pa, pb) = (self.pos[a as usize], self.pos[b as usize]);
+            let target = 0.5 * (self.scale[a as usize] + self.scale[b as usize]);
+            if (pb - pa).length() <= ratio * target {
+                continue;
+            }
+            if self.tris.len() + 2 > MAX_TRIANGLES {
+                return Err(FillError::Failed(format!(
+                    "refinement would exceed {MAX_TRIANGLES} triangles"
+                )));
+            }
+            let c = Self::third(self.tris[t1 as usize], a, b);
+            let d = Self::third(self.tris[t2 as usize], a, b);
+            let (pc, pd, pm) = (self.pos[c as usize], self.pos[d as usize], (pa + pb) / 2.0);
+            // the split halves the angles at c and d: refuse when that makes slivers
+            let before = min_angle(pa, pb, pc).min(min_angle(pb, pa, pd));
+            let after = min_angle(pa, pm, pc)
+                .min(min_angle(pm, pb, pc))
+                .min(min_angle(pb, pm, pd))
+                .min(min_angle(pm, pa, pd));
+            if after < before.min(SLIVER_GUARD.to_radians()) {
+                continue;
+            }
+            let m = self.pos.len() as u32;
+            self.pos.push(pm);
+            self.scale.push(target);
+            let t3 = self.tris.len() as u32;
+            let t4 = t3 + 1;
+            // (a, b, c) -> (a, m, c) + (m, b, c); (b, a, d) -> (b, m, d) + (m, a, d)
+            self.tris[t1 as usize] = [a, m, c];
+            self.tris.push([m, b, c]);
+            self.tris[t2 as usize] = [b, m, d];
+            self.tris.push([m, a, d]);
+            self.edges.remove(&(a, b));
+            self.edges.remove(&(b, a));
+            self.edges.insert((a, m), t1);
+            self.edges.insert((m, c), t1);
+            self.edges.insert((c, a), t1);
+            self.edges.insert((m, b), t3);
+            self.edges.insert((b, c), t3);
+            self.edges.insert((c, m), t3);
+            self.edges.insert((b, m), t2);
+            self.edges.insert((m, d), t2);
+            self.edges.insert((d, b), t2);
+            self.edges.insert((m, a), t4);
+            self.edges.insert((a, d), t4);
+            self.edges.insert((d, m), t4);
+            count += 1;
+        }
+        Ok(count)
+    }
+
+    /// Flips the longest edge of every triangle whose smallest angle is below
+    /// `limit` (radians) when that raises the smallest angle of the pair; a few
+    /// passes. Used after fairing, which can move vertices into slivers.
+    pub fn fix_slivers(&mut self, limit: f64, deadline: &Deadline) -> Result<usize, FillError> {
+        let min3 = min_angle;
+        let mut flips = 0;
+        for _ in 0..4 {
+            deadline.check()?;
+            let mut changed = 0;
+            for t in 0..self.tris.len() {
+                let tri = self.tris[t];
+                let p = tri.map(|i| self.pos[i as usize]);
+                let before_t = min3(p[0], p[1], p[2]);
+                if before_t >= limit {
+                    continue;
+                }
+                // longest edge
+                let mut e = 0;
+                let mut best = -1.0;
+                for c in 0..3 {
+                    let l = (p[(c + 1) % 3] - p[c]).length_squared();
+                    if l > best {
+                        best = l;
+                        e = c;
+                    }
+                }
+                let (a, b) = (tri[e], tri[(e + 1) % 3]);
+                let Some(f) = self.flip_candidate(a, b) else {
+                    continue;
+                };
+                let (c, d) = (f.2, f.3);
+                let [pa, pb, pc, pd] = [a, b, c, d].map(|i| self.pos[i as usize]);
+                let before = min3(pa, pb, pc).min(min3(pb, pa, pd));
+                let after = min3(pc, pa, pd).min(min3(pd, pb, pc));
+                if after > before {
+                    self.do_flip(a, b, f);
+                    changed += 1;
+                }
+            }
+            flips += changed;
+            if changed == 0 {
+                break;
+            }
+        }
+        Ok(flips)
+    }
+
     /// Tangential relaxation of the new vertices, each moved toward the mean of its
     /// neighbours within its tangent plane (uniform Laplacian with the normal part
     /// removed), followed by Delaunay swaps; `iterations` rounds. A move that would
@@ -333,6 +508,9 @@ impl<'a> Refiner<'a> {
         let k = self.k;
         for _ in 0..iterations {
             deadline.check()?;
+            if self.split_ratio > 0.0 {
+                self.split_long_edges(self.split_ratio, deadline)?;
+            }
             let n = self.pos.len();
             if n == k {
                 return Ok(());
@@ -385,25 +563,43 @@ impl<'a> Refiner<'a> {
                 let d = mean - p;
                 let d = d - normal * normal.dot(d);
                 let q = p + d;
-                // keep every incident triangle oriented and non-degenerate
-                let ok = fan[v - k].iter().all(|&t| {
+                // keep every incident triangle oriented, and its smallest angle above
+                // the smaller of the current one and 15 degrees
+                let min3 = min_angle;
+                let mut before_min = f64::INFINITY;
+                let mut after_min = f64::INFINITY;
+                for &t in &fan[v - k] {
                     let tri = self.tris[t as usize];
-                    let before = tri.map(|i| self.pos[i as usize]);
-                    let after = tri.map(|i| {
+                    let b = tri.map(|i| self.pos[i as usize]);
+                    let a = tri.map(|i| {
                         if i as usize == v {
                             q
                         } else {
                             self.pos[i as usize]
                         }
                     });
-                    let nb_ = (before[1] - before[0]).cross(before[2] - before[0]);
-                    let na = (after[1] - after[0]).cross(after[2] - after[0]);
-                    let l2 = (after[1] - after[0])
-                        .length_squared()
-                        .max((after[2] - after[1]).length_squared())
-                        .max((after[0] - after[2]).length_squared());
-                    na.dot(nb_) > 0.0 && na.length() > 1e-6 * l2
-                });
+                    before_min = before_min.min(min3(b[0], b[1], b[2]));
+                    after_min = after_min.min(min3(a[0], a[1], a[2]));
+                }
+                let ok = after_min >= before_min.min(SLIVER_GUARD.to_radians())
+                    && fan[v - k].iter().all(|&t| {
+                        let tri = self.tris[t as usize];
+                        let before = tri.map(|i| self.pos[i as usize]);
+                        let after = tri.map(|i| {
+                            if i as usize == v {
+                                q
+                            } else {
+                                self.pos[i as usize]
+                            }
+                        });
+                        let nb_ = (before[1] - before[0]).cross(before[2] - before[0]);
+                        let na = (after[1] - after[0]).cross(after[2] - after[0]);
+                        let l2 = (after[1] - after[0])
+                            .length_squared()
+                            .max((after[2] - after[1]).length_squared())
+                            .max((after[0] - after[2]).length_squared());
+                        na.dot(nb_) > 0.0 && na.length() > 1e-6 * l2
+                    });
                 if ok && q.is_finite() {
                     self.pos[v] = q;
                 }

@@ -106,7 +106,7 @@ impl W {
         if self.bad != o.bad {
             return self.bad < o.bad;
         }
-        if (self.dih - o.dih).abs() > 1e-9 {
+        if (self.dih - o.dih).abs() > 1e-12 {
             return self.dih < o.dih;
         }
         self.area < o.area
@@ -117,24 +117,33 @@ fn unit_normal(a: DVec3, b: DVec3, c: DVec3) -> DVec3 {
     (b - a).cross(c - a).normalize_or_zero()
 }
 
+/// Dihedral measure between two unit normals: `1 - cos(angle)`, monotone in the
+/// angle (0 coplanar, 2 folded back), cheaper than the angle itself.
 fn dihedral(n1: DVec3, n2: DVec3) -> f64 {
     if n1 == DVec3::ZERO || n2 == DVec3::ZERO {
-        return std::f64::consts::PI;
+        return 2.0;
     }
-    n1.dot(n2).clamp(-1.0, 1.0).acos()
+    1.0 - n1.dot(n2).clamp(-1.0, 1.0)
 }
 
 /// Weight of triangle (a, m, b) alone (loop indices), without dihedral terms.
 fn tri_weight(inp: &LoopInput, a: u32, m: u32, b: u32) -> W {
     let [pa, pm, pb] = [a, m, b].map(|i| inp.pts[i as usize]);
     let area = super::super::geom::tri_area(pa, pm, pb);
-    let l = (pm - pa)
-        .length()
-        .max((pb - pm).length())
-        .max((pa - pb).length());
-    let ang = super::super::geom::angles(pa, pm, pb);
-    let min = ang[0].min(ang[1]).min(ang[2]);
-    let bad = area.is_nan() || area <= 1e-12 * l * l || min < inp.min_angle;
+    // the smallest angle is opposite the shortest edge; compare cosines
+    let mut l = [
+        (pm - pb).length_squared(),
+        (pb - pa).length_squared(),
+        (pa - pm).length_squared(),
+    ];
+    l.sort_unstable_by(|x, y| x.total_cmp(y));
+    let [s, m2, g] = l;
+    let cos_min = if m2 > 0.0 && g > 0.0 {
+        (m2 + g - s) / (2.0 * (m2 * g).sqrt())
+    } else {
+        1.0
+    };
+    let bad = area.is_nan() || area <= 1e-12 * g || cos_min > inp.min_angle.cos();
     W {
         bad: bad as u32,
         dih: 0.0,
@@ -179,23 +188,14 @@ pub fn exact(inp: &LoopInput, idx: &[u32]) -> Result<Vec<[u32; 3]>, FillError> {
         best[at(i, i + 1)] = Some(W::ZERO);
     }
     let dih = inp.dihedral();
-    // normal of the triangle on the inner side of the polygon edge or chord i-j
-    let side_normal = |best: &[Option<W>], arg: &[u32], i: usize, j: usize| -> Option<DVec3> {
-        if j == i + 1 {
-            inp.outside(idx[i], idx[j])
-        } else {
-            let m = arg[at(i, j)];
-            if m == u32::MAX || best[at(i, j)].is_none() {
-                return None;
-            }
-            let m = m as usize;
-            Some(unit_normal(
-                inp.pts[idx[i] as usize],
-                inp.pts[idx[m] as usize],
-                inp.pts[idx[j] as usize],
-            ))
+    // normal of the triangle on the inner side of each polygon edge or chord i-j
+    let mut side: Vec<Option<DVec3>> = vec![None; if dih { n * n } else { 0 }];
+    if dih {
+        for i in 0..n - 1 {
+            side[at(i, i + 1)] = inp.outside(idx[i], idx[i + 1]);
         }
-    };
+    }
+    let p = |i: usize| inp.pts[idx[i] as usize];
     for d in 2..n {
         inp.deadline.check()?;
         for i in 0..n - d {
@@ -204,21 +204,28 @@ pub fn exact(inp: &LoopInput, idx: &[u32]) -> Result<Vec<[u32; 3]>, FillError> {
             if !closing && !inp.chord_ok(idx[i], idx[j]) {
                 continue;
             }
-            let mut cur: Option<(W, u32)> = None;
+            let mut cur: Option<(W, u32, DVec3)> = None;
             for m in i + 1..j {
                 let (Some(wl), Some(wr)) = (best[at(i, m)], best[at(m, j)]) else {
                     continue;
                 };
-                let mut w = wl.plus(wr).plus(tri_weight(inp, idx[i], idx[m], idx[j]));
-                if dih {
-                    let [pi, pm, pj] = [idx[i], idx[m], idx[j]].map(|v| inp.pts[v as usize]);
-                    let nt = unit_normal(pi, pm, pj);
-                    let mut worst = 0.0f64;
-                    if let Some(nl) = side_normal(&best, &arg, i, m) {
-                        worst = worst.max(dihedral(nt, nl));
+                let partial = wl.plus(wr);
+                // weights only grow: a partial sum that is not better cannot win
+                if let Some(c) = &cur {
+                    if !partial.better_than(&c.0) {
+                        continue;
                     }
-                    if let Some(nr) = side_normal(&best, &arg, m, j) {
-                        worst = worst.max(dihedral(nt, nr));
+                }
+                let mut w = partial.plus(tri_weight(inp, idx[i], idx[m], idx[j]));
+                let nt = if dih {
+                    unit_normal(p(i), p(m), p(j))
+                } else {
+                    DVec3::ZERO
+                };
+                if dih {
+                    let mut worst = 0.0f64;
+                    for nn in [side[at(i, m)], side[at(m, j)]].into_iter().flatten() {
+                        worst = worst.max(dihedral(nt, nn));
                     }
                     if closing {
                         if let Some(no) = inp.outside(idx[j], idx[i]) {
@@ -228,12 +235,15 @@ pub fn exact(inp: &LoopInput, idx: &[u32]) -> Result<Vec<[u32; 3]>, FillError> {
                     w.dih = w.dih.max(worst);
                 }
                 if cur.as_ref().map_or(true, |c| w.better_than(&c.0)) {
-                    cur = Some((w, m as u32));
+                    cur = Some((w, m as u32, nt));
                 }
             }
-            if let Some((w, m)) = cur {
+            if let Some((w, m, nt)) = cur {
                 best[at(i, j)] = Some(w);
                 arg[at(i, j)] = m;
+                if dih {
+                    side[at(i, j)] = Some(nt);
+                }
             }
         }
     }
