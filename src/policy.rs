@@ -43,6 +43,8 @@ pub enum Method {
     AdvancingFront,
     /// Plain advancing front, LS-SVM prediction of the Laplacian, Poisson solve (paper 003).
     LssvmPoisson,
+    /// Improved wavefront with curvature restoration (paper 004, Huang et al. 2022).
+    Wavefront,
 }
 
 impl Method {
@@ -52,6 +54,7 @@ impl Method {
         Method::MinAreaFair,
         Method::AdvancingFront,
         Method::LssvmPoisson,
+        Method::Wavefront,
     ];
     /// The policy spelling.
     pub fn name(self) -> &'static str {
@@ -60,6 +63,7 @@ impl Method {
             Method::MinAreaFair => "min_area_fair",
             Method::AdvancingFront => "advancing_front",
             Method::LssvmPoisson => "lssvm_poisson",
+            Method::Wavefront => "wavefront",
         }
     }
 }
@@ -254,6 +258,54 @@ impl Default for Lssvm {
     }
 }
 
+/// Where the wavefront puts a new point out of the vertex's tangent plane.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum WavefrontPlacement {
+    /// In the plane of the two front edges (paper 004 §2.2; interpolated where that
+    /// plane is ill-conditioned).
+    EdgePlane,
+    /// Elevation interpolated between the two front edges' elevations (follows the
+    /// chords; restoration then tends to flatten).
+    Interpolated,
+}
+
+/// The improved wavefront with curvature restoration (paper 004, ALGORITHMS C).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct Wavefront {
+    /// At or below this front angle (degrees) the vertex is closed with one triangle.
+    pub alpha: f64,
+    /// At or below this angle one new point on the bisector; above, two on the trisectors.
+    pub beta: f64,
+    /// When the smallest front angle is at least this (degrees), a front vertex drawn
+    /// at random (from `seed`) is processed instead.
+    pub mu: f64,
+    /// Rotate each new triangle to its expected normal (paper 004 §2.2.1).
+    pub curvature_restoration: bool,
+    /// Out-of-plane placement of new points.
+    pub placement: WavefrontPlacement,
+    /// Give up (and fall back) after this many front steps per boundary vertex.
+    pub max_steps_per_vertex: usize,
+    /// A new point closer than this times the hole's mean boundary edge length to a
+    /// non-adjacent front vertex is merged into it.
+    pub merge_distance: f64,
+}
+
+impl Default for Wavefront {
+    fn default() -> Self {
+        Wavefront {
+            alpha: 75.0,
+            beta: 135.0,
+            mu: 150.0,
+            curvature_restoration: true,
+            placement: WavefrontPlacement::EdgePlane,
+            max_steps_per_vertex: 200,
+            merge_distance: 0.5,
+        }
+    }
+}
+
 impl Lssvm {
     /// Range checks.
     pub fn validate(&self) -> Result<(), Invalid> {
@@ -387,6 +439,7 @@ pub struct Policy {
     pub refine: Refine,
     pub fair: Fair,
     pub front: Front,
+    pub wavefront: Wavefront,
     pub checks: Checks,
     pub limits: Limits,
     pub smooth: Smooth,
@@ -415,6 +468,19 @@ impl PolicyName for TriangulationWeight {
         match self {
             TriangulationWeight::Area => "area",
             TriangulationWeight::DihedralArea => "dihedral_area",
+        }
+    }
+}
+
+impl PolicyName for WavefrontPlacement {
+    const VALUES: &'static [WavefrontPlacement] = &[
+        WavefrontPlacement::EdgePlane,
+        WavefrontPlacement::Interpolated,
+    ];
+    fn policy_name(self) -> &'static str {
+        match self {
+            WavefrontPlacement::EdgePlane => "edge_plane",
+            WavefrontPlacement::Interpolated => "interpolated",
         }
     }
 }
@@ -478,6 +544,18 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
             "merge_distance",
             "max_steps_per_vertex",
             "fair",
+        ],
+    ),
+    (
+        "wavefront",
+        &[
+            "alpha",
+            "beta",
+            "mu",
+            "curvature_restoration",
+            "placement",
+            "max_steps_per_vertex",
+            "merge_distance",
         ],
     ),
     ("checks", &["self_intersection", "min_angle_deg"]),
@@ -740,6 +818,38 @@ impl Policy {
             return Err(Invalid::new(
                 "front.max_steps_per_vertex",
                 format!("must be at least 1 (got {})", f.max_steps_per_vertex),
+            ));
+        }
+
+        let w = &self.wavefront;
+        open("wavefront.alpha", w.alpha, 0.0, 180.0)?;
+        open("wavefront.beta", w.beta, 0.0, 180.0)?;
+        if w.beta <= w.alpha {
+            return Err(Invalid::pair(
+                "wavefront.beta",
+                format!(
+                    "must be greater than wavefront.alpha = {} (got {})",
+                    w.alpha, w.beta
+                ),
+                "wavefront.alpha",
+                format!(
+                    "must be less than wavefront.beta = {} (got {})",
+                    w.beta, w.alpha
+                ),
+            ));
+        }
+        finite("wavefront.mu", w.mu)?;
+        if !(w.mu > 0.0 && w.mu <= 180.0) {
+            return Err(Invalid::new(
+                "wavefront.mu",
+                format!("must be greater than 0 and at most 180 (got {})", w.mu),
+            ));
+        }
+        closed("wavefront.merge_distance", w.merge_distance, 0.0, 1.0)?;
+        if w.max_steps_per_vertex < 1 {
+            return Err(Invalid::new(
+                "wavefront.max_steps_per_vertex",
+                format!("must be at least 1 (got {})", w.max_steps_per_vertex),
             ));
         }
 
@@ -1093,6 +1203,17 @@ impl Reader<'_> {
                 p.front.max_steps_per_vertex = self.usize(key, v)?
             }
             ("front", "fair") => p.front.fair = self.boolean(key, v)?,
+            ("wavefront", "alpha") => p.wavefront.alpha = self.float(key, v)?,
+            ("wavefront", "beta") => p.wavefront.beta = self.float(key, v)?,
+            ("wavefront", "mu") => p.wavefront.mu = self.float(key, v)?,
+            ("wavefront", "curvature_restoration") => {
+                p.wavefront.curvature_restoration = self.boolean(key, v)?
+            }
+            ("wavefront", "placement") => p.wavefront.placement = self.named(key, v)?,
+            ("wavefront", "max_steps_per_vertex") => {
+                p.wavefront.max_steps_per_vertex = self.usize(key, v)?
+            }
+            ("wavefront", "merge_distance") => p.wavefront.merge_distance = self.float(key, v)?,
             ("lssvm", "rings") => p.lssvm.rings = self.usize(key, v)?,
             ("lssvm", "gamma") => p.lssvm.gamma = self.float(key, v)?,
             ("lssvm", "kernel_width") => p.lssvm.kernel_width = self.float(key, v)?,
@@ -1761,6 +1882,7 @@ mod tests {
                     angle_small: angles.0, angle_large: angles.1, alpha, omega1, merge_distance,
                     max_steps_per_vertex, fair: front_fair,
                 },
+                wavefront: Wavefront::default(),
                 checks: Checks { self_intersection, min_angle_deg },
                 limits: Limits { hole_time_ms },
                 smooth: Smooth {

@@ -12,6 +12,7 @@ pub mod fan;
 pub mod geom;
 pub mod lssvm_poisson;
 pub mod min_area_fair;
+pub mod wavefront;
 
 use crate::check::Checker;
 use crate::mesh::{Mesh, VertexId};
@@ -144,6 +145,7 @@ pub fn run_method(method: Method, ctx: &FillContext) -> Result<Patch, FillError>
         Method::MinAreaFair => min_area_fair::fill(ctx),
         Method::AdvancingFront => advancing_front::fill(ctx),
         Method::LssvmPoisson => lssvm_poisson::fill(ctx),
+        Method::Wavefront => wavefront::fill(ctx),
     }
 }
 
