@@ -22,6 +22,8 @@ pub mod mesh;
 pub mod policy;
 pub mod report;
 pub mod smooth;
+#[cfg(test)]
+pub(crate) mod testutil;
 
 use fill::Hole;
 use io::{Format, IoError, RawMesh};

@@ -270,72 +270,10 @@ mod tests {
     use crate::io::RawMesh;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
-    use std::collections::HashMap;
 
     /// A unit icosphere subdivided `levels` times (outward faces).
     fn icosphere(levels: usize) -> RawMesh {
-        let t = (1.0 + 5f64.sqrt()) / 2.0;
-        let mut pos: Vec<DVec3> = [
-            (-1., t, 0.),
-            (1., t, 0.),
-            (-1., -t, 0.),
-            (1., -t, 0.),
-            (0., -1., t),
-            (0., 1., t),
-            (0., -1., -t),
-            (0., 1., -t),
-            (t, 0., -1.),
-            (t, 0., 1.),
-            (-t, 0., -1.),
-            (-t, 0., 1.),
-        ]
-        .iter()
-        .map(|&(x, y, z)| DVec3::new(x, y, z).normalize())
-        .collect();
-        let mut faces: Vec<[u32; 3]> = vec![
-            [0, 11, 5],
-            [0, 5, 1],
-            [0, 1, 7],
-            [0, 7, 10],
-            [0, 10, 11],
-            [1, 5, 9],
-            [5, 11, 4],
-            [11, 10, 2],
-            [10, 7, 6],
-            [7, 1, 8],
-            [3, 9, 4],
-            [3, 4, 2],
-            [3, 2, 6],
-            [3, 6, 8],
-            [3, 8, 9],
-            [4, 9, 5],
-            [2, 4, 11],
-            [6, 2, 10],
-            [8, 6, 7],
-            [9, 8, 1],
-        ];
-        for _ in 0..levels {
-            let mut mid: HashMap<(u32, u32), u32> = HashMap::new();
-            let mut next = Vec::with_capacity(faces.len() * 4);
-            let mut m = |a: u32, b: u32, pos: &mut Vec<DVec3>| -> u32 {
-                *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                    pos.push(((pos[a as usize] + pos[b as usize]) * 0.5).normalize());
-                    (pos.len() - 1) as u32
-                })
-            };
-            for [a, b, c] in faces {
-                let ab = m(a, b, &mut pos);
-                let bc = m(b, c, &mut pos);
-                let ca = m(c, a, &mut pos);
-                next.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
-            }
-            faces = next;
-        }
-        RawMesh {
-            positions: pos,
-            faces,
-            ..Default::default()
-        }
+        crate::testutil::icosphere(levels, 1.0)
     }
 
     fn volume(m: &Mesh) -> f64 {

@@ -1570,7 +1570,6 @@ mod tests {
     use crate::io::RawMesh;
     use crate::policy::{Checks, Policy};
     use rand::{Rng, SeedableRng};
-    use std::collections::HashMap;
 
     /// Builds a mesh from a soup, removing every face that touches a vertex for which
     /// `cut` holds; returns the mesh and the hole loop nearest `centre`.
@@ -1629,67 +1628,8 @@ mod tests {
 
     /// Icosphere of radius `r`, `subdiv` midpoint subdivisions.
     fn icosphere(subdiv: usize, r: f64) -> (Vec<DVec3>, Vec<[u32; 3]>) {
-        let t = (1.0 + 5f64.sqrt()) / 2.0;
-        let mut pos: Vec<DVec3> = [
-            (-1.0, t, 0.0),
-            (1.0, t, 0.0),
-            (-1.0, -t, 0.0),
-            (1.0, -t, 0.0),
-            (0.0, -1.0, t),
-            (0.0, 1.0, t),
-            (0.0, -1.0, -t),
-            (0.0, 1.0, -t),
-            (t, 0.0, -1.0),
-            (t, 0.0, 1.0),
-            (-t, 0.0, -1.0),
-            (-t, 0.0, 1.0),
-        ]
-        .iter()
-        .map(|&(x, y, z)| DVec3::new(x, y, z).normalize())
-        .collect();
-        let mut faces: Vec<[u32; 3]> = vec![
-            [0, 11, 5],
-            [0, 5, 1],
-            [0, 1, 7],
-            [0, 7, 10],
-            [0, 10, 11],
-            [1, 5, 9],
-            [5, 11, 4],
-            [11, 10, 2],
-            [10, 7, 6],
-            [7, 1, 8],
-            [3, 9, 4],
-            [3, 4, 2],
-            [3, 2, 6],
-            [3, 6, 8],
-            [3, 8, 9],
-            [4, 9, 5],
-            [2, 4, 11],
-            [6, 2, 10],
-            [8, 6, 7],
-            [9, 8, 1],
-        ];
-        for _ in 0..subdiv {
-            let mut mid: HashMap<(u32, u32), u32> = HashMap::new();
-            let mut nf = Vec::with_capacity(faces.len() * 4);
-            for f in &faces {
-                let mut m = [0u32; 3];
-                for c in 0..3 {
-                    let (a, b) = (f[c], f[(c + 1) % 3]);
-                    let key = (a.min(b), a.max(b));
-                    m[c] = *mid.entry(key).or_insert_with(|| {
-                        pos.push(((pos[a as usize] + pos[b as usize]) * 0.5).normalize());
-                        (pos.len() - 1) as u32
-                    });
-                }
-                nf.push([f[0], m[0], m[2]]);
-                nf.push([f[1], m[1], m[0]]);
-                nf.push([f[2], m[2], m[1]]);
-                nf.push([m[0], m[1], m[2]]);
-            }
-            faces = nf;
-        }
-        (pos.into_iter().map(|p| p * r).collect(), faces)
+        let m = crate::testutil::icosphere(subdiv, r);
+        (m.positions, m.faces)
     }
 
     /// Open cylinder of radius `r` about the z axis.

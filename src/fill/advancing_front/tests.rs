@@ -154,78 +154,7 @@ fn grid_with_hole(n: usize, cut: impl Fn(DVec3) -> bool) -> (Mesh, Vec<VertexId>
 /// Unit icosphere (`level` subdivisions) with the faces whose centroid lies within
 /// `cap` radians of +z removed.
 fn sphere_with_hole(level: usize, cap: f64) -> (Mesh, Vec<VertexId>) {
-    let t = (1.0 + 5f64.sqrt()) / 2.0;
-    let mut pos: Vec<DVec3> = [
-        [-1.0, t, 0.0],
-        [1.0, t, 0.0],
-        [-1.0, -t, 0.0],
-        [1.0, -t, 0.0],
-        [0.0, -1.0, t],
-        [0.0, 1.0, t],
-        [0.0, -1.0, -t],
-        [0.0, 1.0, -t],
-        [t, 0.0, -1.0],
-        [t, 0.0, 1.0],
-        [-t, 0.0, -1.0],
-        [-t, 0.0, 1.0],
-    ]
-    .iter()
-    .map(|p| DVec3::from(*p).normalize())
-    .collect();
-    let mut faces: Vec<[u32; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    for _ in 0..level {
-        let mut mid: std::collections::HashMap<(u32, u32), u32> = Default::default();
-        let mut next = Vec::with_capacity(faces.len() * 4);
-        let mut m = |a: u32, b: u32, pos: &mut Vec<DVec3>| {
-            *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                pos.push(((pos[a as usize] + pos[b as usize]) * 0.5).normalize());
-                (pos.len() - 1) as u32
-            })
-        };
-        for f in &faces {
-            let ab = m(f[0], f[1], &mut pos);
-            let bc = m(f[1], f[2], &mut pos);
-            let ca = m(f[2], f[0], &mut pos);
-            next.extend_from_slice(&[[f[0], ab, ca], [f[1], bc, ab], [f[2], ca, bc], [ab, bc, ca]]);
-        }
-        faces = next;
-    }
-    let raw = RawMesh {
-        faces: faces
-            .into_iter()
-            .filter(|f| {
-                let c = f
-                    .iter()
-                    .map(|&v| pos[v as usize])
-                    .sum::<DVec3>()
-                    .normalize();
-                c.z < cap.cos()
-            })
-            .collect(),
-        positions: pos,
-        ..Default::default()
-    };
+    let raw = crate::testutil::sphere_cap_removed(level, 1.0, DVec3::Z, cap);
     let (mesh, _) = Mesh::from_raw(&raw);
     mesh.validate().unwrap();
     let loops = mesh.topo.boundary_loops();
