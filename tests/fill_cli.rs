@@ -20,7 +20,7 @@ fn holed_sphere() -> (Soup, usize) {
 fn sphere_holes_are_closed_on_the_sphere_and_input_is_bit_exact() {
     let dir = tempdir();
     let (s, nholes) = holed_sphere();
-    assert_eq!(s.f.len() > 4000, true);
+    assert!(s.f.len() > 4000);
     let inp = dir.path().join("sphere.obj");
     let out = dir.path().join("out.obj");
     let rep = dir.path().join("sphere.repair.json");

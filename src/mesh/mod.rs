@@ -524,7 +524,7 @@ mod tests {
         let mut raw = grid(4);
         // remove the two faces of the cell (1,1)
         let n = 4;
-        let cell = 1 * n + 1;
+        let cell = n + 1; // cell (1, 1)
         raw.faces.remove(2 * cell + 1);
         raw.faces.remove(2 * cell);
         let (mut m, _) = Mesh::from_raw(&raw);

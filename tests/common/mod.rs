@@ -157,8 +157,8 @@ fn compact(v: &[V3], f: &[[usize; 3]]) -> Soup {
     out
 }
 
-/// Writes an OBJ file (shortest round-trip decimal coordinates).
-pub fn write_obj(path: &Path, s: &Soup) {
+/// OBJ text of a soup (shortest round-trip decimal coordinates).
+pub fn obj_text(s: &Soup) -> String {
     let mut t = String::new();
     for p in &s.v {
         t.push_str(&format!("v {} {} {}\n", p[0], p[1], p[2]));
@@ -166,7 +166,12 @@ pub fn write_obj(path: &Path, s: &Soup) {
     for f in &s.f {
         t.push_str(&format!("f {} {} {}\n", f[0] + 1, f[1] + 1, f[2] + 1));
     }
-    std::fs::write(path, t).expect("write fixture");
+    t
+}
+
+/// Writes an OBJ file (shortest round-trip decimal coordinates).
+pub fn write_obj(path: &Path, s: &Soup) {
+    std::fs::write(path, obj_text(s)).expect("write fixture");
 }
 
 /// Reads back an OBJ written by holefill (v and f lines only).

@@ -2,6 +2,9 @@
 //! on temporary folders, drop meshes, wait with bounded polling, read the logs.
 #![allow(dead_code)]
 
+#[path = "../common/mod.rs"]
+mod common;
+
 use serde_json::Value;
 use std::fs;
 use std::io::Write;
@@ -201,93 +204,8 @@ pub fn wait_until(timeout: Duration, mut cond: impl FnMut() -> bool) -> bool {
 /// whose centroid is within `r` of the north pole are removed. OBJ text and the face
 /// count.
 pub fn holed_sphere_obj(level: usize, r: f64) -> (String, usize) {
-    let t = (1.0 + 5f64.sqrt()) / 2.0;
-    let mut v: Vec<[f64; 3]> = vec![
-        [-1., t, 0.],
-        [1., t, 0.],
-        [-1., -t, 0.],
-        [1., -t, 0.],
-        [0., -1., t],
-        [0., 1., t],
-        [0., -1., -t],
-        [0., 1., -t],
-        [t, 0., -1.],
-        [t, 0., 1.],
-        [-t, 0., -1.],
-        [-t, 0., 1.],
-    ];
-    let norm = |p: [f64; 3]| {
-        let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
-        [p[0] / l, p[1] / l, p[2] / l]
-    };
-    for p in v.iter_mut() {
-        *p = norm(*p);
-    }
-    let mut f: Vec<[usize; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    for _ in 0..level {
-        let mut mid = std::collections::HashMap::new();
-        let mut nf = Vec::new();
-        let mut midpoint = |a: usize, b: usize, v: &mut Vec<[f64; 3]>| -> usize {
-            *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                let p = [
-                    (v[a][0] + v[b][0]) / 2.0,
-                    (v[a][1] + v[b][1]) / 2.0,
-                    (v[a][2] + v[b][2]) / 2.0,
-                ];
-                v.push(norm(p));
-                v.len() - 1
-            })
-        };
-        for [a, b, c] in f {
-            let ab = midpoint(a, b, &mut v);
-            let bc = midpoint(b, c, &mut v);
-            let ca = midpoint(c, a, &mut v);
-            nf.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
-        }
-        f = nf;
-    }
-    let pole = [0.0, 0.0, 1.0];
-    let kept: Vec<[usize; 3]> = f
-        .into_iter()
-        .filter(|t| {
-            let c: Vec<f64> = (0..3)
-                .map(|k| (v[t[0]][k] + v[t[1]][k] + v[t[2]][k]) / 3.0)
-                .collect();
-            let d =
-                ((c[0] - pole[0]).powi(2) + (c[1] - pole[1]).powi(2) + (c[2] - pole[2]).powi(2))
-                    .sqrt();
-            d > r
-        })
-        .collect();
-    let mut s = String::new();
-    for p in &v {
-        s.push_str(&format!("v {} {} {}\n", p[0], p[1], p[2]));
-    }
-    for t in &kept {
-        s.push_str(&format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1));
-    }
-    (s, kept.len())
+    let (holed, _) = common::cut(&common::icosphere(level), [0.0, 0.0, 1.0], r);
+    (common::obj_text(&holed), holed.f.len())
 }
 
 /// The small test mesh (level 2: 320 faces, a small hole at the pole).
