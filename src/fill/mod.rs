@@ -10,6 +10,7 @@ pub mod advancing_front;
 pub mod fair;
 pub mod fan;
 pub mod geom;
+pub mod hpde;
 pub mod min_area_fair;
 
 use crate::check::Checker;
@@ -142,6 +143,7 @@ pub fn run_method(method: Method, ctx: &FillContext) -> Result<Patch, FillError>
         Method::Fan => fan::fill(ctx),
         Method::MinAreaFair => min_area_fair::fill(ctx),
         Method::AdvancingFront => advancing_front::fill(ctx),
+        Method::Hpde => hpde::fill(ctx),
     }
 }
 
