@@ -45,6 +45,8 @@ pub enum Method {
     LssvmPoisson,
     /// Improved wavefront with curvature restoration (paper 004, Huang et al. 2022).
     Wavefront,
+    /// Prediction by differential evolution + constrained Delaunay (paper 000).
+    Hpde,
 }
 
 impl Method {
@@ -55,6 +57,7 @@ impl Method {
         Method::AdvancingFront,
         Method::LssvmPoisson,
         Method::Wavefront,
+        Method::Hpde,
     ];
     /// The policy spelling.
     pub fn name(self) -> &'static str {
@@ -64,6 +67,7 @@ impl Method {
             Method::AdvancingFront => "advancing_front",
             Method::LssvmPoisson => "lssvm_poisson",
             Method::Wavefront => "wavefront",
+            Method::Hpde => "hpde",
         }
     }
 }
@@ -258,6 +262,54 @@ impl Default for Lssvm {
     }
 }
 
+/// HPDE: prediction by differential evolution (paper 000 §4; ALGORITHMS D).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct Hpde {
+    /// DE population size per section plane = this times the number of predicted points.
+    pub population_factor: usize,
+    /// DE mutation factor F.
+    pub f: f64,
+    /// DE crossover rate CR.
+    pub cr: f64,
+    /// DE generations per section plane.
+    pub generations: usize,
+    /// Critical dihedral angle Ac (degrees): below it the hole is handled as two planes.
+    pub ac_deg: f64,
+    /// Critical angle Ic (degrees) between a correspondence line and the boundary.
+    pub ic_deg: f64,
+    /// Smoothing iterations of the new vertices (NumSmooth).
+    pub num_smooth: usize,
+    /// Edges shorter than this times EdgeLen are collapsed.
+    pub collapse_rate: f64,
+    /// Target spacing of predicted points, times EdgeLen.
+    pub spacing: f64,
+    /// Each circular arc also passes through its ring point AP (TV = P - AP is then
+    /// the arc's secant); false: the arc is tangent to TV at P (the literal reading).
+    pub arcs_through_ring: bool,
+    /// When the loop projects to no simple polygon on any plane, map it to a circle
+    /// (by arc length) instead of failing.
+    pub disk_fallback: bool,
+}
+
+impl Default for Hpde {
+    fn default() -> Self {
+        Hpde {
+            population_factor: 3,
+            f: 0.8,
+            cr: 0.05,
+            generations: 50,
+            ac_deg: 90.0,
+            ic_deg: 12.0,
+            num_smooth: 60,
+            collapse_rate: 0.6,
+            spacing: 0.8,
+            arcs_through_ring: true,
+            disk_fallback: true,
+        }
+    }
+}
+
 /// Where the wavefront puts a new point out of the vertex's tangent plane.
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
@@ -440,6 +492,7 @@ pub struct Policy {
     pub fair: Fair,
     pub front: Front,
     pub wavefront: Wavefront,
+    pub hpde: Hpde,
     pub checks: Checks,
     pub limits: Limits,
     pub smooth: Smooth,
@@ -558,6 +611,22 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
             "merge_distance",
         ],
     ),
+    (
+        "hpde",
+        &[
+            "population_factor",
+            "f",
+            "cr",
+            "generations",
+            "ac_deg",
+            "ic_deg",
+            "num_smooth",
+            "collapse_rate",
+            "spacing",
+            "arcs_through_ring",
+            "disk_fallback",
+        ],
+    ),
     ("checks", &["self_intersection", "min_angle_deg"]),
     ("limits", &["hole_time_ms"]),
     (
@@ -591,8 +660,12 @@ pub const MAX_POLICY_BYTES: u64 = 1 << 20;
 pub const MAX_FULL_SEARCH: usize = 2000;
 /// Largest `limits.hole_time_ms` (one day).
 pub const MAX_HOLE_TIME_MS: u64 = 86_400_000;
-/// Largest `smooth.iterations`.
+/// Largest `smooth.iterations` (and `hpde.num_smooth`).
 pub const MAX_SMOOTH_ITERATIONS: usize = 10_000;
+/// Largest `hpde.population_factor`.
+pub const MAX_HPDE_POPULATION_FACTOR: usize = 100;
+/// Largest `hpde.generations`.
+pub const MAX_HPDE_GENERATIONS: usize = 100_000;
 
 /// A policy error, naming the file, line and key.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -852,6 +925,40 @@ impl Policy {
                 format!("must be at least 1 (got {})", w.max_steps_per_vertex),
             ));
         }
+        let h = &self.hpde;
+        if !(1..=MAX_HPDE_POPULATION_FACTOR).contains(&h.population_factor) {
+            return Err(Invalid::new(
+                "hpde.population_factor",
+                format!(
+                    "must be between 1 and {MAX_HPDE_POPULATION_FACTOR} (got {})",
+                    h.population_factor
+                ),
+            ));
+        }
+        open("hpde.f", h.f, 0.0, 2.0)?;
+        closed("hpde.cr", h.cr, 0.0, 1.0)?;
+        if h.generations > MAX_HPDE_GENERATIONS {
+            return Err(Invalid::new(
+                "hpde.generations",
+                format!(
+                    "must be at most {MAX_HPDE_GENERATIONS} (got {})",
+                    h.generations
+                ),
+            ));
+        }
+        open("hpde.ac_deg", h.ac_deg, 0.0, 180.0)?;
+        open("hpde.ic_deg", h.ic_deg, 0.0, 90.0)?;
+        if h.num_smooth > MAX_SMOOTH_ITERATIONS {
+            return Err(Invalid::new(
+                "hpde.num_smooth",
+                format!(
+                    "must be at most {MAX_SMOOTH_ITERATIONS} (got {})",
+                    h.num_smooth
+                ),
+            ));
+        }
+        closed("hpde.collapse_rate", h.collapse_rate, 0.0, 1.0)?;
+        closed("hpde.spacing", h.spacing, 0.25, 4.0)?;
 
         let min_angle = self.checks.min_angle_deg;
         finite("checks.min_angle_deg", min_angle)?;
@@ -1219,6 +1326,17 @@ impl Reader<'_> {
             ("lssvm", "kernel_width") => p.lssvm.kernel_width = self.float(key, v)?,
             ("lssvm", "iterations") => p.lssvm.iterations = self.usize(key, v)?,
             ("lssvm", "merge_distance") => p.lssvm.merge_distance = self.float(key, v)?,
+            ("hpde", "population_factor") => p.hpde.population_factor = self.usize(key, v)?,
+            ("hpde", "f") => p.hpde.f = self.float(key, v)?,
+            ("hpde", "cr") => p.hpde.cr = self.float(key, v)?,
+            ("hpde", "generations") => p.hpde.generations = self.usize(key, v)?,
+            ("hpde", "ac_deg") => p.hpde.ac_deg = self.float(key, v)?,
+            ("hpde", "ic_deg") => p.hpde.ic_deg = self.float(key, v)?,
+            ("hpde", "num_smooth") => p.hpde.num_smooth = self.usize(key, v)?,
+            ("hpde", "collapse_rate") => p.hpde.collapse_rate = self.float(key, v)?,
+            ("hpde", "spacing") => p.hpde.spacing = self.float(key, v)?,
+            ("hpde", "arcs_through_ring") => p.hpde.arcs_through_ring = self.boolean(key, v)?,
+            ("hpde", "disk_fallback") => p.hpde.disk_fallback = self.boolean(key, v)?,
             ("checks", "self_intersection") => p.checks.self_intersection = self.boolean(key, v)?,
             ("checks", "min_angle_deg") => p.checks.min_angle_deg = self.float(key, v)?,
             ("limits", "hole_time_ms") => p.limits.hole_time_ms = self.uint(key, v)?,
@@ -1851,6 +1969,21 @@ mod tests {
     }
 
     prop_compose! {
+        fn arb_hpde()(
+            population_factor in 1usize..=100, f in 0.001f64..1.999, cr in 0.0f64..=1.0,
+            generations in 0usize..=100_000, ac_deg in 0.001f64..179.999,
+            ic_deg in 0.001f64..89.999, num_smooth in 0usize..=10_000,
+            collapse_rate in 0.0f64..=1.0, spacing in 0.25f64..=4.0, arcs_through_ring: bool,
+            disk_fallback: bool,
+        ) -> Hpde {
+            Hpde {
+                population_factor, f, cr, generations, ac_deg, ic_deg, num_smooth,
+                collapse_rate, spacing, arcs_through_ring, disk_fallback,
+            }
+        }
+    }
+
+    prop_compose! {
         fn arb_policy()(
             seed in 0u64..=i64::MAX as u64,
             small_max in 3usize..100, extra in 0usize..1000,
@@ -1870,6 +2003,7 @@ mod tests {
             lm in (0.01f64..0.9).prop_flat_map(|l| (Just(l), -0.999f64..(-l - 0.001))),
             smooth_weights in arb_name::<Weights>(), scope in arb_name::<SmoothScope>(),
             rings in 1usize..50, boundary in arb_name::<BoundaryRule>(),
+            hpde in arb_hpde(),
         ) -> Policy {
             Policy {
                 seed,
@@ -1883,6 +2017,7 @@ mod tests {
                     max_steps_per_vertex, fair: front_fair,
                 },
                 wavefront: Wavefront::default(),
+                hpde,
                 checks: Checks { self_intersection, min_angle_deg },
                 limits: Limits { hole_time_ms },
                 smooth: Smooth {

@@ -10,6 +10,7 @@ pub mod advancing_front;
 pub mod fair;
 pub mod fan;
 pub mod geom;
+pub mod hpde;
 pub mod lssvm_poisson;
 pub mod min_area_fair;
 pub mod wavefront;
@@ -146,6 +147,7 @@ pub fn run_method(method: Method, ctx: &FillContext) -> Result<Patch, FillError>
         Method::AdvancingFront => advancing_front::fill(ctx),
         Method::LssvmPoisson => lssvm_poisson::fill(ctx),
         Method::Wavefront => wavefront::fill(ctx),
+        Method::Hpde => hpde::fill(ctx),
     }
 }
 

@@ -1,0 +1,533 @@
+//! Step 6 of HPDE: projection onto the fitted plane (or the two unfolded planes),
+//! constrained Delaunay triangulation with `spade`, lifting (paper 000 §4.5).
+
+use super::super::FillError;
+use super::predict::{fit_plane, Predicted, Segmentation};
+use crate::fill::geom::newell_normal;
+use glam::{DVec2, DVec3};
+use robust::{orient2d, Coord};
+use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
+use std::collections::HashMap;
+
+/// Projection of 3D points to the triangulation plane.
+#[derive(Clone, Debug)]
+pub struct Projection {
+    kind: Kind,
+    /// The segmentation of a folded projection.
+    folded: Option<Segmentation>,
+    /// -1 mirrors the second coordinate so that the loop is counter-clockwise.
+    mirror: f64,
+    /// The projected loop (counter-clockwise, simple).
+    pub loop2d: Vec<DVec2>,
+}
+
+#[derive(Clone, Debug)]
+enum Kind {
+    /// Loop on a circle; see [`Plan::Disk`].
+    Disk,
+    Single {
+        origin: DVec3,
+        u: DVec3,
+        v: DVec3,
+    },
+    Folded {
+        p0: DVec3,
+        axis: DVec3,
+        w1: DVec3,
+        w2: DVec3,
+    },
+}
+
+/// A candidate projection.
+#[derive(Clone, Copy, Debug)]
+enum Plan<'a> {
+    /// The PCA plane of the loop (the paper's).
+    Pca,
+    /// The plane normal to the loop's Newell (area) normal.
+    Newell,
+    /// The plane normal to the sum of the loop's vertex normals.
+    Normals,
+    /// The two fitted planes of a segmentation, unfolded.
+    Folded(&'a Segmentation),
+    /// The loop on a circle by arc length, predicted points on their pairs' chords.
+    Disk,
+}
+
+impl Plan<'_> {
+    fn name(&self) -> &'static str {
+        match self {
+            Plan::Pca => "the fitted (PCA) plane",
+            Plan::Newell => "the Newell plane",
+            Plan::Normals => "the vertex-normal plane",
+            Plan::Folded(_) => "the two unfolded planes",
+            Plan::Disk => "the disk",
+        }
+    }
+}
+
+impl Projection {
+    /// The first candidate projection on which the loop is a simple polygon: the
+    /// paper's choice first (the two unfolded planes when `segmented`, else the PCA
+    /// plane), then the Newell plane, the vertex-normal plane and, when the
+    /// segmentation test found two planes, their unfolding. Fails, naming every
+    /// candidate's problem, when none is simple.
+    pub fn choose(
+        bp: &[DVec3],
+        normals: &[DVec3],
+        split: Option<&Segmentation>,
+        segmented: bool,
+        disk: bool,
+    ) -> Result<Projection, FillError> {
+        let mut plans = Vec::new();
+        if let (Some(s), true) = (split, segmented) {
+            plans.push(Plan::Folded(s));
+        }
+        plans.extend([Plan::Pca, Plan::Newell, Plan::Normals]);
+        if let (Some(s), false) = (split, segmented) {
+            plans.push(Plan::Folded(s));
+        }
+        if disk {
+            plans.push(Plan::Disk);
+        }
+        let mut why = Vec::new();
+        for plan in plans {
+            match Projection::new(bp, normals, plan) {
+                Ok(p) => return Ok(p),
+                Err(e) => why.push(format!("{}: {e}", plan.name())),
+            }
+        }
+        Err(FillError::Failed(format!(
+            "hpde: the loop does not project to a simple polygon on any plane ({})",
+            why.join("; ")
+        )))
+    }
+
+    /// 2D position of a predicted point.
+    pub fn project_predicted(&self, p: &Predicted) -> DVec2 {
+        match (&self.kind, &self.folded) {
+            (Kind::Disk, _) => {
+                let (a, b) = (self.loop2d[p.pair.0], self.loop2d[p.pair.1]);
+                a + (b - a) * p.frac
+            }
+            (_, Some(s)) => self.project(p.pos, second_plane(s, p)),
+            _ => self.project(p.pos, false),
+        }
+    }
+
+    /// The projection of the loop `bp` by `plan`; `Err` with the reason when the
+    /// projected loop is not a simple polygon.
+    fn new(bp: &[DVec3], normals: &[DVec3], plan: Plan) -> Result<Projection, String> {
+        let single = |n: DVec3| -> Result<Kind, String> {
+            let n = n.try_normalize().ok_or("undefined normal")?;
+            let origin = bp.iter().copied().sum::<DVec3>() / bp.len().max(1) as f64;
+            let u = n.any_orthonormal_vector();
+            Ok(Kind::Single {
+                origin,
+                u,
+                v: n.cross(u),
+            })
+        };
+        let seg = match plan {
+            Plan::Folded(s) => Some(s),
+            _ => None,
+        };
+        let kind = match plan {
+            Plan::Disk => Kind::Disk,
+            Plan::Newell => single(newell_normal(bp))?,
+            Plan::Normals => single(normals.iter().copied().sum::<DVec3>())?,
+            Plan::Pca => {
+                let pl = fit_plane(bp, newell_normal(bp));
+                let u = pl.normal.any_orthonormal_vector();
+                Kind::Single {
+                    origin: pl.center,
+                    u,
+                    v: pl.normal.cross(u),
+                }
+            }
+            Plan::Folded(s) => {
+                let (n1, n2) = (s.first.normal, s.second.normal);
+                let dir = n1.cross(n2);
+                let (d1, d2) = (n1.dot(s.first.center), n2.dot(s.second.center));
+                let p0 = (n2.cross(dir) * d1 + dir.cross(n1) * d2) / dir.length_squared();
+                let axis = dir.normalize();
+                let mut w1 = n1.cross(axis);
+                let mut w2 = n2.cross(axis);
+                // the first plane's arc on the positive side, the second's on the negative
+                let side = |w: DVec3, second: bool| -> f64 {
+                    bp.iter()
+                        .enumerate()
+                        .filter(|(i, _)| s.in_second(*i) == second)
+                        .map(|(_, p)| w.dot(*p - p0))
+                        .sum()
+                };
+                if side(w1, false) < 0.0 {
+                    w1 = -w1;
+                }
+                if side(w2, true) > 0.0 {
+                    w2 = -w2;
+                }
+                Kind::Folded { p0, axis, w1, w2 }
+            }
+        };
+        let mut proj = Projection {
+            kind,
+            folded: seg.cloned(),
+            mirror: 1.0,
+            loop2d: Vec::new(),
+        };
+        let mut l: Vec<DVec2> = if let Kind::Disk = proj.kind {
+            // counter-clockwise by arc length, radius perimeter / 2π
+            let k = bp.len();
+            let lens: Vec<f64> = (0..k).map(|i| (bp[(i + 1) % k] - bp[i]).length()).collect();
+            let per: f64 = lens.iter().sum();
+            let r = per / (2.0 * std::f64::consts::PI);
+            let mut acc = 0.0;
+            let mut out = Vec::with_capacity(k);
+            for len in &lens {
+                let a = acc / per * 2.0 * std::f64::consts::PI;
+                out.push(DVec2::new(a.cos(), a.sin()) * r);
+                acc += len;
+            }
+            out
+        } else {
+            bp.iter()
+                .enumerate()
+                .map(|(i, &p)| proj.project(p, seg.is_some_and(|s| s.in_second(i))))
+                .collect()
+        };
+        if signed_area(&l) < 0.0 {
+            proj.mirror = -1.0;
+            for p in l.iter_mut() {
+                p.y = -p.y;
+            }
+        }
+        if let Some(why) = not_simple(&l) {
+            return Err(why);
+        }
+        proj.loop2d = l;
+        Ok(proj)
+    }
+
+    /// Projects `p`; `second` selects the second plane of a folded projection.
+    pub fn project(&self, p: DVec3, second: bool) -> DVec2 {
+        let q = match &self.kind {
+            Kind::Disk => DVec2::ZERO,
+            Kind::Single { origin, u, v } => DVec2::new(u.dot(p - *origin), v.dot(p - *origin)),
+            Kind::Folded { p0, axis, w1, w2 } => {
+                let d = p - *p0;
+                let w = if second { w2 } else { w1 };
+                DVec2::new(axis.dot(d), w.dot(d))
+            }
+        };
+        DVec2::new(q.x, q.y * self.mirror)
+    }
+}
+
+fn signed_area(l: &[DVec2]) -> f64 {
+    let n = l.len();
+    (0..n)
+        .map(|i| {
+            let (a, b) = (l[i], l[(i + 1) % n]);
+            a.x * b.y - b.x * a.y
+        })
+        .sum::<f64>()
+        * 0.5
+}
+
+fn orient(a: DVec2, b: DVec2, c: DVec2) -> f64 {
+    orient2d(
+        Coord { x: a.x, y: a.y },
+        Coord { x: b.x, y: b.y },
+        Coord { x: c.x, y: c.y },
+    )
+}
+
+/// `c` on the closed segment `ab`, given that the three are collinear.
+fn on_segment(a: DVec2, b: DVec2, c: DVec2) -> bool {
+    c.x >= a.x.min(b.x) && c.x <= a.x.max(b.x) && c.y >= a.y.min(b.y) && c.y <= a.y.max(b.y)
+}
+
+/// Closed segments `pq` and `rs` share a point.
+fn segments_meet(p: DVec2, q: DVec2, r: DVec2, s: DVec2) -> bool {
+    let d1 = orient(r, s, p);
+    let d2 = orient(r, s, q);
+    let d3 = orient(p, q, r);
+    let d4 = orient(p, q, s);
+    if ((d1 > 0.0 && d2 < 0.0) || (d1 < 0.0 && d2 > 0.0))
+        && ((d3 > 0.0 && d4 < 0.0) || (d3 < 0.0 && d4 > 0.0))
+    {
+        return true;
+    }
+    (d1 == 0.0 && on_segment(r, s, p))
+        || (d2 == 0.0 && on_segment(r, s, q))
+        || (d3 == 0.0 && on_segment(p, q, r))
+        || (d4 == 0.0 && on_segment(p, q, s))
+}
+
+/// Why a closed polyline is not a simple polygon, or `None`.
+fn not_simple(l: &[DVec2]) -> Option<String> {
+    let n = l.len();
+    if n < 3 {
+        return Some("fewer than 3 points".into());
+    }
+    if l.iter().any(|p| !p.is_finite()) {
+        return Some("non-finite coordinate".into());
+    }
+    if signed_area(l) <= 0.0 {
+        return Some("zero area".into());
+    }
+    for i in 0..n {
+        let (a, b, c) = (l[i], l[(i + 1) % n], l[(i + 2) % n]);
+        if a == b {
+            return Some(format!("vertices {i} and {} coincide", (i + 1) % n));
+        }
+        // adjacent edges folding back onto each other
+        if n > 3 && orient(a, b, c) == 0.0 && (a - b).dot(c - b) > 0.0 {
+            return Some(format!("edges at vertex {} overlap", (i + 1) % n));
+        }
+    }
+    // a bounding-box sweep over x keeps this near-linear for typical loops
+    let mut order: Vec<usize> = (0..n).collect();
+    let lo = |i: usize| l[i].x.min(l[(i + 1) % n].x);
+    let hi = |i: usize| l[i].x.max(l[(i + 1) % n].x);
+    order.sort_by(|&a, &b| lo(a).total_cmp(&lo(b)).then(a.cmp(&b)));
+    let mut active: Vec<usize> = Vec::new();
+    for &e in &order {
+        let x = lo(e);
+        active.retain(|&f| hi(f) >= x);
+        for &f in &active {
+            let adjacent = (e + 1) % n == f || (f + 1) % n == e;
+            if adjacent {
+                continue;
+            }
+            if segments_meet(l[e], l[(e + 1) % n], l[f], l[(f + 1) % n]) {
+                return Some(format!(
+                    "edges {e}-{} and {f}-{} cross",
+                    (e + 1) % n,
+                    (f + 1) % n
+                ));
+            }
+        }
+        active.push(e);
+    }
+    None
+}
+
+/// The plane of a predicted point in a folded projection: that of its pair's arc, or,
+/// for a pair straddling both arcs, the nearer fitted plane.
+fn second_plane(s: &Segmentation, p: &Predicted) -> bool {
+    match (s.in_second(p.pair.0), s.in_second(p.pair.1)) {
+        (true, true) => true,
+        (false, false) => false,
+        _ => {
+            let d1 = s.first.normal.dot(p.pos - s.first.center).abs();
+            let d2 = s.second.normal.dot(p.pos - s.second.center).abs();
+            d2 < d1
+        }
+    }
+}
+
+/// Point strictly inside a polygon (crossing number).
+pub(crate) fn inside(poly: &[DVec2], q: DVec2) -> bool {
+    let mut c = false;
+    let n = poly.len();
+    for i in 0..n {
+        let (a, b) = (poly[i], poly[(i + 1) % n]);
+        if (a.y > q.y) != (b.y > q.y) && q.x < a.x + (q.y - a.y) / (b.y - a.y) * (b.x - a.x) {
+            c = !c;
+        }
+    }
+    c
+}
+
+fn dist_to_segment(a: DVec2, b: DVec2, q: DVec2) -> f64 {
+    let ab = b - a;
+    let l2 = ab.length_squared();
+    let t = if l2 > 0.0 {
+        ((q - a).dot(ab) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (a + ab * t - q).length()
+}
+
+/// The lifted triangulation: loop vertices first, then the kept predicted points.
+#[derive(Clone, Debug)]
+pub struct Triangulated {
+    pub positions: Vec<DVec3>,
+    pub triangles: Vec<[u32; 3]>,
+}
+
+/// Constrained Delaunay triangulation of the projected loop and predicted points,
+/// lifted to 3D.
+pub fn triangulate(
+    proj: &Projection,
+    bp: &[DVec3],
+    pts: &[Predicted],
+    drop_dist: f64,
+) -> Result<Triangulated, FillError> {
+    let k = bp.len();
+    let poly = &proj.loop2d;
+    let fail = |m: &str| FillError::Failed(format!("hpde: {m}"));
+    // keep predicted points inside, away from the loop and from each other
+    let cell = drop_dist.max(1e-300);
+    let key = |q: DVec2| ((q.x / cell).floor() as i64, (q.y / cell).floor() as i64);
+    let mut grid: HashMap<(i64, i64), Vec<DVec2>> = HashMap::new();
+    let mut kept: Vec<(DVec2, DVec3)> = Vec::new();
+    for pr in pts {
+        let (q, p) = (proj.project_predicted(pr), pr.pos);
+        if !q.is_finite() || !inside(poly, q) {
+            continue;
+        }
+        let near_loop = (0..k).any(|i| dist_to_segment(poly[i], poly[(i + 1) % k], q) < drop_dist);
+        if near_loop {
+            continue;
+        }
+        let (cx, cy) = key(q);
+        let mut close = false;
+        'outer: for dx in -1..=1 {
+            for dy in -1..=1 {
+                if let Some(list) = grid.get(&(cx + dx, cy + dy)) {
+                    if list.iter().any(|o| (*o - q).length() < drop_dist) {
+                        close = true;
+                        break 'outer;
+                    }
+                }
+            }
+        }
+        if close {
+            continue;
+        }
+        grid.entry((cx, cy)).or_default().push(q);
+        kept.push((q, p));
+    }
+    let mut cdt = ConstrainedDelaunayTriangulation::<Point2<f64>>::new();
+    // spade vertex index -> our index
+    let mut ours: Vec<Option<u32>> = Vec::new();
+    let mut handles = Vec::with_capacity(k);
+    for (i, q) in poly.iter().enumerate() {
+        let before = cdt.num_vertices();
+        let h = cdt
+            .insert(Point2::new(q.x, q.y))
+            .map_err(|e| fail(&format!("cannot triangulate the projected loop: {e:?}")))?;
+        if cdt.num_vertices() == before {
+            return Err(fail("two loop vertices project to the same point"));
+        }
+        if ours.len() <= h.index() {
+            ours.resize(h.index() + 1, None);
+        }
+        ours[h.index()] = Some(i as u32);
+        handles.push(h);
+    }
+    let mut positions: Vec<DVec3> = bp.to_vec();
+    for (q, p) in &kept {
+        let before = cdt.num_vertices();
+        let Ok(h) = cdt.insert(Point2::new(q.x, q.y)) else {
+            continue;
+        };
+        if cdt.num_vertices() == before {
+            continue;
+        }
+        if ours.len() <= h.index() {
+            ours.resize(h.index() + 1, None);
+        }
+        ours[h.index()] = Some(positions.len() as u32);
+        positions.push(*p);
+    }
+    for i in 0..k {
+        let (a, b) = (handles[i], handles[(i + 1) % k]);
+        if !cdt.exists_constraint(a, b) {
+            let _ = cdt.try_add_constraint(a, b);
+        }
+        if !cdt.exists_constraint(a, b) {
+            return Err(fail(&format!(
+                "boundary edge {i}-{} could not be kept in the triangulation",
+                (i + 1) % k
+            )));
+        }
+    }
+    let mut triangles = Vec::new();
+    for f in cdt.inner_faces() {
+        let ps = f.positions();
+        let cen = DVec2::new(
+            (ps[0].x + ps[1].x + ps[2].x) / 3.0,
+            (ps[0].y + ps[1].y + ps[2].y) / 3.0,
+        );
+        if !inside(poly, cen) {
+            continue;
+        }
+        let vs = f.vertices();
+        let mut t = [0u32; 3];
+        for (c, v) in vs.iter().enumerate() {
+            t[c] = ours
+                .get(v.fix().index())
+                .copied()
+                .flatten()
+                .ok_or_else(|| fail("triangulation produced an unknown vertex"))?;
+        }
+        triangles.push(t);
+    }
+    if triangles.is_empty() {
+        return Err(fail("the triangulation of the loop is empty"));
+    }
+    // drop predicted points no triangle uses (cannot happen for interior points, but
+    // keep the output a clean disk)
+    let mut used = vec![false; positions.len()];
+    for t in &triangles {
+        for &i in t {
+            used[i as usize] = true;
+        }
+    }
+    if used[..k].iter().any(|u| !u) {
+        return Err(fail("a loop vertex is not used by the triangulation"));
+    }
+    let mut remap = vec![u32::MAX; positions.len()];
+    let mut out_pos = Vec::with_capacity(positions.len());
+    for (i, p) in positions.iter().enumerate() {
+        if used[i] {
+            remap[i] = out_pos.len() as u32;
+            out_pos.push(*p);
+        }
+    }
+    for t in triangles.iter_mut() {
+        for i in t.iter_mut() {
+            *i = remap[*i as usize];
+        }
+    }
+    Ok(Triangulated {
+        positions: out_pos,
+        triangles,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn simple_and_self_crossing_polygons() {
+        let sq = vec![
+            DVec2::new(0.0, 0.0),
+            DVec2::new(1.0, 0.0),
+            DVec2::new(1.0, 1.0),
+            DVec2::new(0.0, 1.0),
+        ];
+        assert!(not_simple(&sq).is_none());
+        let bow = vec![
+            DVec2::new(0.0, 0.0),
+            DVec2::new(1.0, 1.0),
+            DVec2::new(1.0, 0.0),
+            DVec2::new(0.0, 1.0),
+        ];
+        assert!(not_simple(&bow).is_some());
+        // a vertex touching a non-adjacent edge
+        let touch = vec![
+            DVec2::new(0.0, 0.0),
+            DVec2::new(2.0, 0.0),
+            DVec2::new(2.0, 2.0),
+            DVec2::new(1.0, 0.0),
+            DVec2::new(0.0, 2.0),
+        ];
+        assert!(not_simple(&touch).is_some());
+    }
+}
