@@ -9,7 +9,7 @@
 
 use super::text::{has_nul, parse_coord, parse_coord_f32, parse_f64, parse_i64, show, tokens};
 use super::text::{Lines, Next, MAX_LINE};
-use super::{color_byte, MAX_ELEMENTS};
+use super::{color_byte, Caps, MAX_ELEMENTS};
 use super::{io_error, malformed, read_error, Encoding, IoError, Precision, RawMesh};
 use glam::DVec3;
 use std::io::{BufRead, Read, Write};
@@ -54,6 +54,31 @@ impl Scalar {
     }
     fn is_int(self) -> bool {
         !matches!(self, Scalar::F32 | Scalar::F64)
+    }
+    /// The range of an integer type (`None` for floating-point types).
+    fn int_range(self) -> Option<(i64, i64)> {
+        Some(match self {
+            Scalar::I8 => (i8::MIN.into(), i8::MAX.into()),
+            Scalar::U8 => (0, u8::MAX.into()),
+            Scalar::I16 => (i16::MIN.into(), i16::MAX.into()),
+            Scalar::U16 => (0, u16::MAX.into()),
+            Scalar::I32 => (i32::MIN.into(), i32::MAX.into()),
+            Scalar::U32 => (0, u32::MAX.into()),
+            Scalar::F32 | Scalar::F64 => return None,
+        })
+    }
+    /// The type's name in a header.
+    fn name(self) -> &'static str {
+        match self {
+            Scalar::I8 => "char",
+            Scalar::U8 => "uchar",
+            Scalar::I16 => "short",
+            Scalar::U16 => "ushort",
+            Scalar::I32 => "int",
+            Scalar::U32 => "uint",
+            Scalar::F32 => "float",
+            Scalar::F64 => "double",
+        }
     }
     /// True when every value of the type is exactly an `f32`.
     fn fits_f32(self) -> bool {
@@ -115,7 +140,12 @@ enum Role {
 }
 
 /// Reads a PLY file of `len` bytes.
-pub(crate) fn read<R: BufRead>(path: &Path, reader: R, len: u64) -> Result<RawMesh, IoError> {
+pub(crate) fn read<R: BufRead>(
+    path: &Path,
+    reader: R,
+    len: u64,
+    caps: &Caps,
+) -> Result<RawMesh, IoError> {
     let mut lines = Lines::new(reader);
     let (encoding, elements) = read_header(path, &mut lines)?;
     let remaining = len.saturating_sub(lines.consumed());
@@ -130,11 +160,11 @@ pub(crate) fn read<R: BufRead>(path: &Path, reader: R, len: u64) -> Result<RawMe
             return Err(bad(format!("element '{}' has no properties", el.name)));
         }
         if el.name == "vertex" || el.name == "face" {
-            if el.count > MAX_ELEMENTS {
-                return Err(bad(format!(
-                    "{} '{}' elements exceed the limit of {MAX_ELEMENTS}",
-                    el.count, el.name
-                )));
+            if el.name == "vertex" && el.count > caps.vertices() {
+                return Err(bad(caps.vertex_msg(Some(el.count))));
+            }
+            if el.name == "face" && el.count > caps.faces() {
+                return Err(bad(caps.face_msg(Some(el.count))));
             }
             let slot = if el.name == "vertex" {
                 &mut vertex
@@ -293,7 +323,7 @@ pub(crate) fn read<R: BufRead>(path: &Path, reader: R, len: u64) -> Result<RawMe
         if k == vi {
             read_vertices(&mut body, el, &roles, &mut raw)?;
         } else if k == fi {
-            polygons = read_faces(&mut body, el, index_prop, vel.count, &mut raw)?;
+            polygons = read_faces(&mut body, el, index_prop, vel.count, caps, &mut raw)?;
         } else {
             for i in 0..el.count {
                 body.begin(i, el.count)?;
@@ -333,7 +363,16 @@ fn read_header<R: BufRead>(
         {
             Next::Line(ln, l) => (ln, l),
             Next::Eof => return Err(malformed(path, None, "the PLY header has no 'end_header'")),
-            Next::TooLong(ln) => return Err(malformed(path, Some(ln), "PLY header line too long")),
+            Next::Bad(ln, _) if first => {
+                return Err(malformed(
+                    path,
+                    Some(ln),
+                    "not a PLY file (the first line is not 'ply')",
+                ))
+            }
+            Next::Bad(ln, why) => {
+                return Err(malformed(path, Some(ln), format!("PLY header: {why}")))
+            }
         };
         let bad = |m: String| malformed(path, Some(ln), m);
         if first {
@@ -516,7 +555,8 @@ impl<R: BufRead> Body<'_, R> {
                         *line = ln;
                         return Ok(());
                     }
-                    Next::Eof | Next::TooLong(_) => {
+                    Next::Bad(ln, why) => return Err(malformed(self.path, Some(ln), why)),
+                    Next::Eof => {
                         return Err(malformed(
                             self.path,
                             None,
@@ -591,6 +631,10 @@ impl<R: BufRead> Body<'_, R> {
             Some(res) => res.map_err(|e| self.bin_err(e))?,
             None => {
                 // A value declared `float` is an f32: rounded once from the text.
+                if t.is_int() {
+                    // The header declares an integer: the text must be one.
+                    return self.int(t).map(|v| v as f64);
+                }
                 let r = self.token()?;
                 let tok = self.tok_bytes(r);
                 let v = if t == Scalar::F32 {
@@ -634,7 +678,20 @@ impl<R: BufRead> Body<'_, R> {
             None => {
                 let r = self.token()?;
                 let tok = self.tok_bytes(r);
-                parse_i64(tok).ok_or_else(|| self.err(format!("'{}' is not an integer", show(tok))))
+                let v = parse_i64(tok).ok_or_else(|| {
+                    self.err(format!(
+                        "'{}' is not an integer (the header declares {})",
+                        show(tok),
+                        t.name()
+                    ))
+                })?;
+                match t.int_range() {
+                    Some((lo, hi)) if v < lo || v > hi => Err(self.err(format!(
+                        "{v} is out of range for the declared type {}",
+                        t.name()
+                    ))),
+                    _ => Ok(v),
+                }
             }
         }
     }
@@ -741,6 +798,7 @@ fn read_faces<R: BufRead>(
     el: &Element,
     index_prop: Option<usize>,
     num_vertices: u64,
+    caps: &Caps,
     raw: &mut RawMesh,
 ) -> Result<u64, IoError> {
     let mut polygons = 0;
@@ -773,10 +831,8 @@ fn read_faces<R: BufRead>(
                             0 => first = v,
                             1 => prev = v,
                             _ => {
-                                if raw.faces.len() as u64 >= MAX_ELEMENTS {
-                                    return Err(
-                                        body.err(format!("more than {MAX_ELEMENTS} triangles"))
-                                    );
+                                if raw.faces.len() as u64 >= caps.faces() {
+                                    return Err(body.err(caps.face_msg(None)));
                                 }
                                 raw.faces.push([first, prev, v]);
                                 prev = v;

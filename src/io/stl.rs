@@ -10,9 +10,11 @@
 //! Facet normals and the attribute bytes are ignored on reading and recomputed on
 //! writing.
 
-use super::text::{has_nul, parse_coord, show, strip_comment, tokens, Lines, Next, MAX_LINE};
-use super::MAX_ELEMENTS;
+use super::text::{
+    has_nul, parse_coord, show, strip_comment, tokens, Lines, Next, MAX_LINE, UTF8_BOM,
+};
 use super::{io_error, malformed, read_error, Encoding, FastBuild, IoError, Precision, RawMesh};
+use super::{Caps, MAX_ELEMENTS};
 use glam::DVec3;
 use std::collections::HashMap;
 use std::io::{BufRead, Read, Write};
@@ -22,13 +24,15 @@ use std::path::Path;
 struct Welder {
     map: HashMap<[u64; 3], u32, FastBuild>,
     corners: u64,
+    max: u64,
 }
 
 impl Welder {
-    fn new(capacity: usize) -> Self {
+    fn new(capacity: usize, max: u64) -> Self {
         Welder {
             map: HashMap::with_capacity_and_hasher(capacity, FastBuild::default()),
             corners: 0,
+            max: max.min(MAX_ELEMENTS),
         }
     }
 
@@ -45,7 +49,7 @@ impl Welder {
         match self.map.entry(key) {
             std::collections::hash_map::Entry::Occupied(e) => Some(*e.get()),
             std::collections::hash_map::Entry::Vacant(e) => {
-                if next as u64 >= MAX_ELEMENTS {
+                if next as u64 >= self.max {
                     return None;
                 }
                 positions.push(p);
@@ -83,7 +87,12 @@ fn text_facets_follow(head: &[u8]) -> bool {
 }
 
 /// Reads an STL file of `len` bytes.
-pub(crate) fn read<R: BufRead>(path: &Path, mut reader: R, len: u64) -> Result<RawMesh, IoError> {
+pub(crate) fn read<R: BufRead>(
+    path: &Path,
+    mut reader: R,
+    len: u64,
+    caps: &Caps,
+) -> Result<RawMesh, IoError> {
     let mut head = Vec::with_capacity(84);
     (&mut reader)
         .take(84)
@@ -94,17 +103,19 @@ pub(crate) fn read<R: BufRead>(path: &Path, mut reader: R, len: u64) -> Result<R
         _ => None,
     };
     let is_solid = head
+        .strip_prefix(UTF8_BOM)
+        .unwrap_or(&head)
         .trim_ascii_start()
         .get(..5)
         .is_some_and(|s| s.eq_ignore_ascii_case(b"solid"));
     if let Some(n) = count {
         if 84 + 50 * u64::from(n) == len && !(is_solid && text_facets_follow(&head)) {
-            return read_binary(path, reader, n);
+            return read_binary(path, reader, n, caps);
         }
     }
     if is_solid {
         let chained = std::io::Read::chain(head.as_slice(), reader);
-        return read_ascii(path, chained).map_err(|e| match (e, count) {
+        return read_ascii(path, chained, caps).map_err(|e| match (e, count) {
             (
                 IoError::Malformed {
                     path,
@@ -142,7 +153,15 @@ pub(crate) fn read<R: BufRead>(path: &Path, mut reader: R, len: u64) -> Result<R
     }
 }
 
-fn read_binary<R: Read>(path: &Path, mut reader: R, n: u32) -> Result<RawMesh, IoError> {
+fn read_binary<R: Read>(
+    path: &Path,
+    mut reader: R,
+    n: u32,
+    caps: &Caps,
+) -> Result<RawMesh, IoError> {
+    if u64::from(n) > caps.faces() {
+        return Err(malformed(path, None, caps.face_msg(Some(u64::from(n)))));
+    }
     let mut raw = RawMesh {
         precision: Precision::F32,
         encoding: Encoding::BinaryLittleEndian,
@@ -152,7 +171,7 @@ fn read_binary<R: Read>(path: &Path, mut reader: R, n: u32) -> Result<RawMesh, I
     // by data (a closed surface has about half as many vertices as triangles).
     raw.faces.reserve(n as usize);
     raw.positions.reserve(n as usize / 2 + 3);
-    let mut welder = Welder::new(n as usize / 2 + 3);
+    let mut welder = Welder::new(n as usize / 2 + 3, caps.vertices());
     let mut rec = [0u8; 50];
     let f = |rec: &[u8; 50], o: usize| -> f64 {
         match rec.get(o..o + 4) {
@@ -175,9 +194,9 @@ fn read_binary<R: Read>(path: &Path, mut reader: R, n: u32) -> Result<RawMesh, I
                     format!("triangle {t}: non-finite coordinate {p} (NaN and infinity are not allowed)"),
                 ));
             }
-            *slot = welder.vertex(p, &mut raw.positions).ok_or_else(|| {
-                malformed(path, None, format!("more than {MAX_ELEMENTS} vertices"))
-            })?;
+            *slot = welder
+                .vertex(p, &mut raw.positions)
+                .ok_or_else(|| malformed(path, None, caps.vertex_msg(None)))?;
         }
         raw.faces.push(face);
     }
@@ -185,14 +204,14 @@ fn read_binary<R: Read>(path: &Path, mut reader: R, n: u32) -> Result<RawMesh, I
     Ok(raw)
 }
 
-fn read_ascii<R: BufRead>(path: &Path, reader: R) -> Result<RawMesh, IoError> {
+fn read_ascii<R: BufRead>(path: &Path, reader: R, caps: &Caps) -> Result<RawMesh, IoError> {
     let mut raw = RawMesh {
         precision: Precision::F64,
         encoding: Encoding::Ascii,
         ..RawMesh::default()
     };
     let mut lines = Lines::new(reader);
-    let mut welder = Welder::new(1024);
+    let mut welder = Welder::new(1024, caps.vertices());
     let mut in_facet = false;
     let mut in_loop = false;
     let mut corners: Vec<u32> = Vec::with_capacity(4);
@@ -201,7 +220,7 @@ fn read_ascii<R: BufRead>(path: &Path, reader: R) -> Result<RawMesh, IoError> {
         let (ln, line) = match lines.next_line(MAX_LINE).map_err(|e| io_error(path, e))? {
             Next::Line(ln, l) => (ln, l),
             Next::Eof => break,
-            Next::TooLong(ln) => return Err(malformed(path, Some(ln), "line too long")),
+            Next::Bad(ln, why) => return Err(malformed(path, Some(ln), why)),
         };
         let bad = |m: String| malformed(path, Some(ln), m);
         if has_nul(line) {
@@ -245,7 +264,7 @@ fn read_ascii<R: BufRead>(path: &Path, reader: R) -> Result<RawMesh, IoError> {
             }
             let v = welder
                 .vertex(DVec3::from_array(c), &mut raw.positions)
-                .ok_or_else(|| bad(format!("more than {MAX_ELEMENTS} vertices")))?;
+                .ok_or_else(|| bad(caps.vertex_msg(None)))?;
             corners.push(v);
         } else if is(b"endloop") {
             if !in_loop {
@@ -271,8 +290,8 @@ fn read_ascii<R: BufRead>(path: &Path, reader: R) -> Result<RawMesh, IoError> {
             }
             for w in rest.windows(2) {
                 if let [b, c] = *w {
-                    if raw.faces.len() as u64 >= MAX_ELEMENTS {
-                        return Err(bad(format!("more than {MAX_ELEMENTS} triangles")));
+                    if raw.faces.len() as u64 >= caps.faces() {
+                        return Err(bad(caps.face_msg(None)));
                     }
                     raw.faces.push([a, b, c]);
                 }
@@ -390,7 +409,7 @@ mod tests {
     #[test]
     fn welder_merges_signed_zeros_only() {
         let mut pos = Vec::new();
-        let mut w = Welder::new(4);
+        let mut w = Welder::new(4, MAX_ELEMENTS);
         let a = w.vertex(DVec3::new(0.0, 1.0, 2.0), &mut pos);
         let b = w.vertex(DVec3::new(-0.0, 1.0, 2.0), &mut pos);
         let c = w.vertex(DVec3::new(f64::from(0.1f32), 1.0, 2.0), &mut pos);

@@ -9,6 +9,9 @@ use std::io::{BufRead, Read};
 /// vertices still fits).
 pub(crate) const MAX_LINE: u64 = 64 << 20;
 
+/// The UTF-8 byte order mark, skipped at the start of text files.
+pub(crate) const UTF8_BOM: &[u8] = b"\xEF\xBB\xBF";
+
 /// A line reader over a buffered source that counts lines (1-based) and bytes.
 pub(crate) struct Lines<R> {
     inner: R,
@@ -23,8 +26,9 @@ pub(crate) enum Next<'a> {
     Line(usize, &'a [u8]),
     /// The end of the file.
     Eof,
-    /// A line longer than the allowed maximum (its number).
-    TooLong(usize),
+    /// A line that cannot be text of a mesh file (its number and why): longer than
+    /// the allowed maximum, or holding a carriage return that does not end it.
+    Bad(usize, &'static str),
 }
 
 impl<R: BufRead> Lines<R> {
@@ -79,8 +83,12 @@ impl<R: BufRead> Lines<R> {
         }
         self.consumed += n as u64;
         self.line += 1;
+        if self.line == 1 && self.buf.starts_with(UTF8_BOM) {
+            // A UTF-8 byte order mark before the first line is not content.
+            self.buf.drain(..UTF8_BOM.len());
+        }
         if n as u64 > max && self.buf.last() != Some(&b'\n') {
-            return Ok(Next::TooLong(self.line));
+            return Ok(Next::Bad(self.line, "line too long"));
         }
         let mut s: &[u8] = &self.buf;
         if let Some(t) = s.strip_suffix(b"\n") {
@@ -88,6 +96,13 @@ impl<R: BufRead> Lines<R> {
         }
         if let Some(t) = s.strip_suffix(b"\r") {
             s = t;
+        }
+        // (Binary data, with NUL bytes, is left to the readers to report as such.)
+        if s.contains(&b'\r') && !has_nul(s) {
+            return Ok(Next::Bad(
+                self.line,
+                "carriage return inside a line (CR-only line endings are not supported; use LF or CRLF)",
+            ));
         }
         Ok(Next::Line(self.line, s))
     }
