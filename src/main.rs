@@ -72,6 +72,15 @@ struct FillArgs {
     /// Print nothing but errors and the FILL_TIME_S line.
     #[arg(long, short)]
     quiet: bool,
+    /// Refuse input files larger than this many bytes (0 = no limit).
+    #[arg(long, default_value_t = 0)]
+    max_file_bytes: u64,
+    /// Refuse inputs with more faces (triangles after fanning) than this (0 = no limit).
+    #[arg(long, default_value_t = 0)]
+    max_faces: u64,
+    /// Refuse inputs with more vertices than this (0 = no limit).
+    #[arg(long, default_value_t = 0)]
+    max_vertices: u64,
 }
 
 fn main() -> ExitCode {
@@ -144,7 +153,13 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
     };
 
     let t = Instant::now();
-    let raw = holefill::read(&args.input, Some(in_format)).map_err(io_failure)?;
+    let limits = holefill::io::ReadLimits {
+        max_file_bytes: args.max_file_bytes,
+        max_vertices: args.max_vertices,
+        max_faces: args.max_faces,
+    };
+    let raw = holefill::io::read_with_limits(&args.input, Some(in_format), &limits)
+        .map_err(io_failure)?;
     let read_ms = t.elapsed().as_secs_f64() * 1000.0;
 
     let (out, mut report) = holefill::repair(&raw, &policy)
