@@ -455,6 +455,17 @@ pub(crate) fn write_real<W: Write>(w: &mut W, v: f64, f32: bool) -> std::io::Res
     }
 }
 
+/// A colour component read from a file, as the `[0, 1]` value [`RawMesh::colors`]
+/// holds: clamped (NaN reads as 0), so that a finite `f64` too large for an `f32`
+/// or a value out of range never becomes a non-finite or out-of-range colour.
+pub(crate) fn unit_color(v: f64) -> f32 {
+    if v.is_nan() {
+        0.0
+    } else {
+        v.clamp(0.0, 1.0) as f32
+    }
+}
+
 /// A colour component in `[0, 1]` as a byte.
 pub(crate) fn color_byte(c: f32) -> u8 {
     (c.clamp(0.0, 1.0) * 255.0).round() as u8

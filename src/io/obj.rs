@@ -11,7 +11,7 @@
 
 use super::text::{has_nul, parse_coord, parse_f64, parse_i64, show, strip_comment, tokens};
 use super::text::{Lines, Next, MAX_LINE};
-use super::{io_error, malformed, Caps, IoError, Precision, RawMesh, MAX_ELEMENTS};
+use super::{io_error, malformed, unit_color, Caps, IoError, Precision, RawMesh, MAX_ELEMENTS};
 use glam::DVec3;
 use std::io::{BufRead, Write};
 use std::path::Path;
@@ -174,6 +174,9 @@ pub(crate) fn read<R: BufRead>(path: &Path, reader: R, caps: &Caps) -> Result<Ra
                 }
                 raw.notes
                     .push("OBJ vertex colours above 1 read as 0..255 and divided by 255".into());
+            }
+            for c in colors.iter_mut().flatten() {
+                *c = unit_color(f64::from(*c));
             }
             raw.colors = Some(colors);
         } else {

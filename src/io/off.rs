@@ -10,7 +10,7 @@
 
 use super::text::{has_nul, parse_coord, parse_f64, parse_i64, show, strip_comment, tokens};
 use super::text::{Lines, Next, MAX_LINE};
-use super::{color_byte, io_error, malformed, Caps, IoError, Precision, RawMesh};
+use super::{color_byte, io_error, malformed, unit_color, Caps, IoError, Precision, RawMesh};
 use glam::DVec3;
 use std::io::{BufRead, Write};
 use std::path::Path;
@@ -209,7 +209,7 @@ pub(crate) fn read<R: BufRead>(
                 let v = parse_f64(tok)
                     .filter(|v| v.is_finite())
                     .ok_or_else(|| bad(format!("bad colour value '{}'", show(tok))))?;
-                *slot = if ints { (v / 255.0) as f32 } else { v as f32 };
+                *slot = unit_color(if ints { v / 255.0 } else { v });
             }
             colors.push(c);
         }

@@ -9,7 +9,7 @@
 
 use super::text::{has_nul, parse_coord, parse_coord_f32, parse_f64, parse_i64, show, tokens};
 use super::text::{Lines, Next, MAX_LINE};
-use super::{color_byte, Caps, MAX_ELEMENTS};
+use super::{color_byte, unit_color, Caps, MAX_ELEMENTS};
 use super::{io_error, malformed, read_error, Encoding, IoError, Precision, RawMesh};
 use glam::DVec3;
 use std::io::{BufRead, Read, Write};
@@ -759,7 +759,7 @@ fn color_value(v: f64, t: Scalar) -> f32 {
         Scalar::F32 | Scalar::F64 => v,
         _ => v / 255.0,
     };
-    c as f32
+    unit_color(c)
 }
 
 fn read_vertices<R: BufRead>(
