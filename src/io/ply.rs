@@ -768,7 +768,13 @@ fn read_vertices<R: BufRead>(
     roles: &[Role],
     raw: &mut RawMesh,
 ) -> Result<(), IoError> {
+    let layout = binary_vertex_layout(body, el, roles);
     for i in 0..el.count {
+        if let Some((layout, size)) = &layout {
+            if fast_vertex(body, layout, *size, raw) {
+                continue;
+            }
+        }
         body.begin(i, el.count)?;
         let mut p = DVec3::ZERO;
         let mut c = [0.0f32; 3];
@@ -792,6 +798,149 @@ fn read_vertices<R: BufRead>(
     Ok(())
 }
 
+/// Decodes a binary scalar from the start of `b` (None when `b` is too short).
+fn decode(b: &[u8], t: Scalar, be: bool) -> Option<f64> {
+    macro_rules! d {
+        ($t:ty) => {{
+            let a: [u8; std::mem::size_of::<$t>()] =
+                b.get(..std::mem::size_of::<$t>())?.try_into().ok()?;
+            if be {
+                <$t>::from_be_bytes(a)
+            } else {
+                <$t>::from_le_bytes(a)
+            }
+        }};
+    }
+    Some(match t {
+        Scalar::I8 => f64::from(d!(i8)),
+        Scalar::U8 => f64::from(d!(u8)),
+        Scalar::I16 => f64::from(d!(i16)),
+        Scalar::U16 => f64::from(d!(u16)),
+        Scalar::I32 => f64::from(d!(i32)),
+        Scalar::U32 => f64::from(d!(u32)),
+        Scalar::F32 => f64::from(d!(f32)),
+        Scalar::F64 => d!(f64),
+    })
+}
+
+/// For a binary vertex element of scalars only: each property's offset, type and
+/// role, and the record size (the fast path of [`read_vertices`]).
+fn binary_vertex_layout<R>(
+    body: &Body<'_, R>,
+    el: &Element,
+    roles: &[Role],
+) -> Option<(Vec<(usize, Scalar, Role)>, usize)> {
+    if !matches!(body.src, Src::Binary { .. }) {
+        return None;
+    }
+    let mut layout = Vec::with_capacity(el.props.len());
+    let mut off = 0usize;
+    for (p, &role) in el.props.iter().zip(roles) {
+        let Kind::Scalar(t) = p.kind else {
+            return None;
+        };
+        layout.push((off, t, role));
+        off += t.size() as usize;
+    }
+    Some((layout, off))
+}
+
+/// Binary fast path: decodes one vertex straight from the reader's buffer when the
+/// buffer holds the whole record and every value is valid; false (nothing consumed)
+/// otherwise, and the generic path reads it (and reports any error).
+fn fast_vertex<R: BufRead>(
+    body: &mut Body<'_, R>,
+    layout: &[(usize, Scalar, Role)],
+    size: usize,
+    raw: &mut RawMesh,
+) -> bool {
+    let Src::Binary { r, be } = &mut body.src else {
+        return false;
+    };
+    let be = *be;
+    let Ok(buf) = r.fill_buf() else {
+        return false;
+    };
+    let Some(rec) = buf.get(..size) else {
+        return false;
+    };
+    let mut p = DVec3::ZERO;
+    let mut c = [0.0f32; 3];
+    for &(off, t, role) in layout {
+        if role == Role::Skip {
+            continue;
+        }
+        let Some(v) = rec.get(off..).and_then(|b| decode(b, t, be)) else {
+            return false;
+        };
+        if !v.is_finite() {
+            return false;
+        }
+        match role {
+            Role::X => p.x = v,
+            Role::Y => p.y = v,
+            Role::Z => p.z = v,
+            Role::R => c[0] = color_value(v, t),
+            Role::G => c[1] = color_value(v, t),
+            Role::B => c[2] = color_value(v, t),
+            Role::Skip => {}
+        }
+    }
+    r.consume(size);
+    raw.positions.push(p);
+    if let Some(cs) = raw.colors.as_mut() {
+        cs.push(c);
+    }
+    true
+}
+
+/// Binary fast path for a face element of one `list uchar int|uint`: a triangle with
+/// indices in range, whole in the reader's buffer, is decoded in place; false
+/// (nothing consumed) for anything else, which the generic path reads.
+fn fast_triangle<R: BufRead>(
+    body: &mut Body<'_, R>,
+    num_vertices: u64,
+    caps: &Caps,
+    raw: &mut RawMesh,
+) -> bool {
+    let Src::Binary { r, be } = &mut body.src else {
+        return false;
+    };
+    let be = *be;
+    if raw.faces.len() as u64 >= caps.faces() {
+        return false;
+    }
+    let Ok(buf) = r.fill_buf() else {
+        return false;
+    };
+    let Some(rec) = buf.get(..13) else {
+        return false;
+    };
+    if rec.first() != Some(&3) {
+        return false;
+    }
+    let mut f = [0u32; 3];
+    for (k, slot) in f.iter_mut().enumerate() {
+        let Some(&[a, b, c, d]) = rec.get(1 + 4 * k..5 + 4 * k) else {
+            return false;
+        };
+        let w = [a, b, c, d];
+        // Signed or unsigned: a negative i32 is a huge u32, out of range either way.
+        let v = if be {
+            u32::from_be_bytes(w)
+        } else {
+            u32::from_le_bytes(w)
+        };
+        if u64::from(v) >= num_vertices {
+            return false;
+        }
+        *slot = v;
+    }
+    r.consume(13);
+    raw.faces.push(f);
+    true
+}
+
 /// Reads the faces; returns the number of polygons fanned.
 fn read_faces<R: BufRead>(
     body: &mut Body<'_, R>,
@@ -802,7 +951,20 @@ fn read_faces<R: BufRead>(
     raw: &mut RawMesh,
 ) -> Result<u64, IoError> {
     let mut polygons = 0;
+    // Binary fast path: a face element holding only a `list uchar int|uint` of indices.
+    let fast = matches!(body.src, Src::Binary { .. })
+        && index_prop == Some(0)
+        && matches!(
+            el.props.as_slice(),
+            [Prop {
+                kind: Kind::List(Scalar::U8, Scalar::I32 | Scalar::U32),
+                ..
+            }]
+        );
     for i in 0..el.count {
+        if fast && fast_triangle(body, num_vertices, caps, raw) {
+            continue;
+        }
         body.begin(i, el.count)?;
         for (k, prop) in el.props.iter().enumerate() {
             match prop.kind {

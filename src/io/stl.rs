@@ -20,14 +20,27 @@ use std::collections::HashMap;
 use std::io::{BufRead, Read, Write};
 use std::path::Path;
 
-/// Welds corners into vertices by exact position.
-struct Welder {
-    map: HashMap<[u64; 3], u32, FastBuild>,
+/// Welds corners into vertices by exact position. The key is the coordinates' bit
+/// pattern: `[u64; 3]` of `f64` (ASCII STL) or [`Key32`] of `f32` (binary STL, half
+/// the memory per entry, so the map stays in cache longer).
+struct Welder<K = [u64; 3]> {
+    map: HashMap<K, u32, FastBuild>,
     corners: u64,
     max: u64,
 }
 
-impl Welder {
+/// The exact position of a binary STL corner: `x | y << 32` and `z` as `f32` bits.
+#[derive(PartialEq, Eq, Clone, Copy)]
+struct Key32(u64, u32);
+
+impl std::hash::Hash for Key32 {
+    fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
+        state.write_u64(self.0);
+        state.write_u64(u64::from(self.1));
+    }
+}
+
+impl<K: std::hash::Hash + Eq> Welder<K> {
     fn new(capacity: usize, max: u64) -> Self {
         Welder {
             map: HashMap::with_capacity_and_hasher(capacity, FastBuild::default()),
@@ -36,15 +49,9 @@ impl Welder {
         }
     }
 
-    /// The vertex at `p` (a new one when no earlier corner had exactly this position).
-    fn vertex(&mut self, p: DVec3, positions: &mut Vec<DVec3>) -> Option<u32> {
+    /// The vertex with key `key` at `p` (a new one when no earlier corner had it).
+    fn vertex_with(&mut self, key: K, p: DVec3, positions: &mut Vec<DVec3>) -> Option<u32> {
         self.corners += 1;
-        // `+ 0.0` turns -0.0 into +0.0 and leaves every other value unchanged.
-        let key = [
-            (p.x + 0.0).to_bits(),
-            (p.y + 0.0).to_bits(),
-            (p.z + 0.0).to_bits(),
-        ];
         let next = positions.len();
         match self.map.entry(key) {
             std::collections::hash_map::Entry::Occupied(e) => Some(*e.get()),
@@ -65,6 +72,29 @@ impl Welder {
             self.corners,
             raw.positions.len()
         ));
+    }
+}
+
+impl Welder<[u64; 3]> {
+    /// The vertex at `p` (a new one when no earlier corner had exactly this position).
+    fn vertex(&mut self, p: DVec3, positions: &mut Vec<DVec3>) -> Option<u32> {
+        // `+ 0.0` turns -0.0 into +0.0 and leaves every other value unchanged.
+        let key = [
+            (p.x + 0.0).to_bits(),
+            (p.y + 0.0).to_bits(),
+            (p.z + 0.0).to_bits(),
+        ];
+        self.vertex_with(key, p, positions)
+    }
+}
+
+impl Welder<Key32> {
+    /// The vertex at the (finite) `f32` position `p`.
+    fn vertex32(&mut self, p: [f32; 3], positions: &mut Vec<DVec3>) -> Option<u32> {
+        let [x, y, z] = p.map(|c| (c + 0.0).to_bits());
+        let key = Key32(u64::from(x) | u64::from(y) << 32, z);
+        let pos = DVec3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
+        self.vertex_with(key, pos, positions)
     }
 }
 
@@ -171,12 +201,12 @@ fn read_binary<R: Read>(
     // by data (a closed surface has about half as many vertices as triangles).
     raw.faces.reserve(n as usize);
     raw.positions.reserve(n as usize / 2 + 3);
-    let mut welder = Welder::new(n as usize / 2 + 3, caps.vertices());
+    let mut welder = Welder::<Key32>::new(n as usize / 2 + 3, caps.vertices());
     let mut rec = [0u8; 50];
-    let f = |rec: &[u8; 50], o: usize| -> f64 {
+    let f = |rec: &[u8; 50], o: usize| -> f32 {
         match rec.get(o..o + 4) {
-            Some(&[a, b, c, d]) => f64::from(f32::from_le_bytes([a, b, c, d])),
-            _ => f64::NAN,
+            Some(&[a, b, c, d]) => f32::from_le_bytes([a, b, c, d]),
+            _ => f32::NAN,
         }
     };
     for t in 0..n {
@@ -186,8 +216,9 @@ fn read_binary<R: Read>(
         let mut face = [0u32; 3];
         for (k, slot) in face.iter_mut().enumerate() {
             let o = 12 + 12 * k;
-            let p = DVec3::new(f(&rec, o), f(&rec, o + 4), f(&rec, o + 8));
-            if !p.is_finite() {
+            let p = [f(&rec, o), f(&rec, o + 4), f(&rec, o + 8)];
+            if !p.iter().all(|c| c.is_finite()) {
+                let p = glam::Vec3::from_array(p);
                 return Err(malformed(
                     path,
                     None,
@@ -195,7 +226,7 @@ fn read_binary<R: Read>(
                 ));
             }
             *slot = welder
-                .vertex(p, &mut raw.positions)
+                .vertex32(p, &mut raw.positions)
                 .ok_or_else(|| malformed(path, None, caps.vertex_msg(None)))?;
         }
         raw.faces.push(face);

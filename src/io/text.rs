@@ -144,9 +144,31 @@ pub(crate) fn parse_f64(tok: &[u8]) -> Option<f64> {
     std::str::from_utf8(tok).ok()?.parse::<f64>().ok()
 }
 
-/// Parses a decimal integer.
+/// Parses a decimal integer (optional sign, then digits; `None` on overflow), as
+/// `str::parse::<i64>` does, without the UTF-8 check (a hot path: OBJ indices).
 pub(crate) fn parse_i64(tok: &[u8]) -> Option<i64> {
-    std::str::from_utf8(tok).ok()?.parse::<i64>().ok()
+    let (neg, digits) = match tok.split_first()? {
+        (b'-', rest) => (true, rest),
+        (b'+', rest) => (false, rest),
+        _ => (false, tok),
+    };
+    if digits.is_empty() {
+        return None;
+    }
+    let mut v: i64 = 0;
+    for &d in digits {
+        if !d.is_ascii_digit() {
+            return None;
+        }
+        let d = i64::from(d - b'0');
+        // Accumulate negatively so that i64::MIN parses.
+        v = v.checked_mul(10)?.checked_sub(d)?;
+    }
+    if neg {
+        Some(v)
+    } else {
+        v.checked_neg()
+    }
 }
 
 /// Parses a finite coordinate, or says what is wrong with the token.
@@ -171,5 +193,38 @@ fn check_coord(tok: &[u8], v: Option<f64>) -> Result<f64, String> {
             show(tok)
         )),
         None => Err(format!("'{}' is not a number", show(tok))),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn parse_i64_matches_std() {
+        for t in [
+            "0",
+            "-0",
+            "+7",
+            "42",
+            "-42",
+            "9223372036854775807",
+            "-9223372036854775808",
+            "9223372036854775808",
+            "-9223372036854775809",
+            "",
+            "-",
+            "+",
+            "1a",
+            "--1",
+            "+-1",
+            " 1",
+            "\u{661}",
+            "00012",
+        ] {
+            assert_eq!(
+                super::parse_i64(t.as_bytes()),
+                t.parse::<i64>().ok(),
+                "{t:?}"
+            );
+        }
     }
 }
