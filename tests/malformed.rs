@@ -98,10 +98,11 @@ fn run(args: &[&str]) -> Run {
 
 /// The output path for an input: same extension (`.obj` for unknown ones).
 fn output_for(input: &Path, dir: &Path) -> PathBuf {
-    let ext = match input.extension().and_then(|e| e.to_str()) {
-        Some(e @ ("obj" | "ply" | "stl" | "off")) => e,
-        _ => "obj",
-    };
+    let ext = input
+        .extension()
+        .and_then(|e| e.to_str())
+        .filter(|e| matches!(*e, "obj" | "ply" | "stl" | "off"))
+        .unwrap_or("obj");
     dir.join(format!("out.{ext}"))
 }
 

@@ -823,13 +823,16 @@ fn decode(b: &[u8], t: Scalar, be: bool) -> Option<f64> {
     })
 }
 
-/// For a binary vertex element of scalars only: each property's offset, type and
-/// role, and the record size (the fast path of [`read_vertices`]).
+/// Where one vertex property sits in a binary record: offset, type, role.
+type Field = (usize, Scalar, Role);
+
+/// For a binary vertex element of scalars only: each property's field and the
+/// record size (the fast path of [`read_vertices`]).
 fn binary_vertex_layout<R>(
     body: &Body<'_, R>,
     el: &Element,
     roles: &[Role],
-) -> Option<(Vec<(usize, Scalar, Role)>, usize)> {
+) -> Option<(Vec<Field>, usize)> {
     if !matches!(body.src, Src::Binary { .. }) {
         return None;
     }
@@ -850,7 +853,7 @@ fn binary_vertex_layout<R>(
 /// otherwise, and the generic path reads it (and reports any error).
 fn fast_vertex<R: BufRead>(
     body: &mut Body<'_, R>,
-    layout: &[(usize, Scalar, Role)],
+    layout: &[Field],
     size: usize,
     raw: &mut RawMesh,
 ) -> bool {
