@@ -84,6 +84,7 @@ struct FillArgs {
 }
 
 fn main() -> ExitCode {
+    quiet_caught_dependency_panics();
     let cli = Cli::parse();
     match cli.cmd {
         Cmd::Fill(args) => ExitCode::from(run_fill(&args)),
@@ -105,6 +106,21 @@ fn main() -> ExitCode {
             }
         },
     }
+}
+
+/// The library catches the panics of faer's sparse LU on a singular matrix (it
+/// panics instead of returning an error) and fails the method over; this keeps the
+/// default panic message for every other panic and logs those at debug level only.
+fn quiet_caught_dependency_panics() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let from_faer = info.location().is_some_and(|l| l.file().contains("/faer-"));
+        if from_faer {
+            tracing::debug!("caught panic in faer: {info}");
+        } else {
+            default(info);
+        }
+    }));
 }
 
 fn run_fill(args: &FillArgs) -> u8 {

@@ -251,8 +251,15 @@ impl FairSolver {
         }
         let mat = SparseColMat::<usize, f64>::try_new_from_triplets(m, m, &triplets)
             .map_err(|e| FillError::Failed(format!("fairing matrix: {e:?}")))?;
-        let lu = mat
-            .sp_lu()
+        // faer's sparse LU panics (instead of returning an error) on an exactly zero
+        // pivot of a numerically singular matrix, which degenerate input can produce
+        // (found by fuzzing): the panic is caught and the method fails over.
+        let lu = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| mat.sp_lu()))
+            .map_err(|_| {
+                FillError::Failed(
+                    "fairing factorisation failed: singular matrix (zero pivot)".into(),
+                )
+            })?
             .map_err(|e| FillError::Failed(format!("fairing factorisation failed: {e:?}")))?;
         Ok(FairSolver { lu, rhs, unknowns })
     }
