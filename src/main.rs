@@ -72,9 +72,19 @@ struct FillArgs {
     /// Print nothing but errors and the FILL_TIME_S line.
     #[arg(long, short)]
     quiet: bool,
+    /// Refuse input files larger than this many bytes (0 = no limit).
+    #[arg(long, default_value_t = 0)]
+    max_file_bytes: u64,
+    /// Refuse inputs with more faces (triangles after fanning) than this (0 = no limit).
+    #[arg(long, default_value_t = 0)]
+    max_faces: u64,
+    /// Refuse inputs with more vertices than this (0 = no limit).
+    #[arg(long, default_value_t = 0)]
+    max_vertices: u64,
 }
 
 fn main() -> ExitCode {
+    quiet_caught_dependency_panics();
     let cli = Cli::parse();
     match cli.cmd {
         Cmd::Fill(args) => {
@@ -105,6 +115,21 @@ fn main() -> ExitCode {
             }
         },
     }
+}
+
+/// The library catches the panics of faer's sparse LU on a singular matrix (it
+/// panics instead of returning an error) and fails the method over; this keeps the
+/// default panic message for every other panic and logs those at debug level only.
+fn quiet_caught_dependency_panics() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let from_faer = info.location().is_some_and(|l| l.file().contains("/faer-"));
+        if from_faer {
+            tracing::debug!("caught panic in faer: {info}");
+        } else {
+            default(info);
+        }
+    }));
 }
 
 fn run_fill(args: &FillArgs) -> u8 {
@@ -153,7 +178,13 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
     };
 
     let t = Instant::now();
-    let raw = holefill::read(&args.input, Some(in_format)).map_err(io_failure)?;
+    let limits = holefill::io::ReadLimits {
+        max_file_bytes: args.max_file_bytes,
+        max_vertices: args.max_vertices,
+        max_faces: args.max_faces,
+    };
+    let raw = holefill::io::read_with_limits(&args.input, Some(in_format), &limits)
+        .map_err(io_failure)?;
     let read_ms = t.elapsed().as_secs_f64() * 1000.0;
 
     let (out, mut report) = holefill::repair(&raw, &policy)

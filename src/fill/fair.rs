@@ -283,9 +283,22 @@ impl FairSolver {
         };
         let factor = match llt {
             Some(l) => Factor::Llt(l),
-            None => Factor::Lu(Box::new(mat.sp_lu().map_err(|e| {
-                FillError::Failed(format!("fairing factorisation failed: {e:?}"))
-            })?)),
+            None => {
+                // faer's sparse LU panics (instead of returning an error) on an exactly
+                // zero pivot of a numerically singular matrix, which degenerate input
+                // can produce (found by fuzzing): the panic is caught and the method
+                // fails over.
+                let lu = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| mat.sp_lu()))
+                    .map_err(|_| {
+                        FillError::Failed(
+                            "fairing factorisation failed: singular matrix (zero pivot)".into(),
+                        )
+                    })?
+                    .map_err(|e| {
+                        FillError::Failed(format!("fairing factorisation failed: {e:?}"))
+                    })?;
+                Factor::Lu(Box::new(lu))
+            }
         };
         Ok(FairSolver {
             factor,

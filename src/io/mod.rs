@@ -149,18 +149,145 @@ const BUF_CAPACITY: usize = 1 << 20;
 /// returned soup keeps the file's vertex order; polygons are fanned into triangles
 /// and what the reader resolved on the way is listed in [`RawMesh::notes`].
 pub fn read(path: &Path, format: Option<Format>) -> Result<RawMesh, IoError> {
+    read_with_limits(path, format, &ReadLimits::default())
+}
+
+/// Size limits for reading untrusted files; `0` means no limit (the format limit
+/// of `u32` indices still applies).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ReadLimits {
+    /// Largest accepted file, in bytes (checked from the file's metadata before
+    /// anything is read).
+    pub max_file_bytes: u64,
+    /// Largest accepted number of vertices (header counts are checked before any
+    /// allocation; streamed vertices as they are read).
+    pub max_vertices: u64,
+    /// Largest accepted number of faces, counted as triangles after fanning
+    /// (header counts of polygons are checked before any allocation).
+    pub max_faces: u64,
+}
+
+/// The element caps a reader enforces: the configured limits, or the `u32` format
+/// limit when none is set.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Caps {
+    limits: ReadLimits,
+}
+
+impl Caps {
+    pub(crate) fn new(limits: &ReadLimits) -> Caps {
+        Caps { limits: *limits }
+    }
+    /// Caps with no configured limit (only the format limit).
+    #[cfg(test)]
+    pub(crate) fn none() -> Caps {
+        Caps::new(&ReadLimits::default())
+    }
+    /// The most vertices accepted.
+    pub(crate) fn vertices(&self) -> u64 {
+        cap(self.limits.max_vertices)
+    }
+    /// The most triangles accepted.
+    pub(crate) fn faces(&self) -> u64 {
+        cap(self.limits.max_faces)
+    }
+    /// The error message for `n` vertices (or "more than the cap" when `n` is None).
+    pub(crate) fn vertex_msg(&self, n: Option<u64>) -> String {
+        limit_msg(n, "vertices", self.limits.max_vertices, "max_vertices")
+    }
+    /// The error message for `n` faces (or "more than the cap" when `n` is None).
+    pub(crate) fn face_msg(&self, n: Option<u64>) -> String {
+        limit_msg(n, "triangles", self.limits.max_faces, "max_faces")
+    }
+}
+
+fn cap(limit: u64) -> u64 {
+    if limit == 0 {
+        MAX_ELEMENTS
+    } else {
+        limit.min(MAX_ELEMENTS)
+    }
+}
+
+fn limit_msg(n: Option<u64>, what: &str, limit: u64, key: &str) -> String {
+    let cap = cap(limit);
+    let head = match n {
+        Some(n) => format!("{n} {what} exceed"),
+        None => format!("more than {cap} {what}:"),
+    };
+    if limit == 0 || limit > MAX_ELEMENTS {
+        format!("{head} the format limit of {MAX_ELEMENTS}")
+    } else {
+        format!("{head} the configured limit {key} = {limit}")
+    }
+}
+
+/// Reads a mesh file under [`ReadLimits`]: a file over `max_file_bytes` is refused
+/// before it is read, and vertex/face counts over their limits stop the reader
+/// (header counts before any allocation). Errors are [`IoError::Malformed`] naming
+/// the file and the limit.
+pub fn read_with_limits(
+    path: &Path,
+    format: Option<Format>,
+    limits: &ReadLimits,
+) -> Result<RawMesh, IoError> {
     let format = resolve_format(path, format)?;
     let file = File::open(path).map_err(|e| io_error(path, e))?;
     let len = file.metadata().map_err(|e| io_error(path, e))?.len();
+    if limits.max_file_bytes > 0 && len > limits.max_file_bytes {
+        return Err(malformed(
+            path,
+            None,
+            format!(
+                "the file has {len} bytes, over the configured limit max_file_bytes = {}",
+                limits.max_file_bytes
+            ),
+        ));
+    }
+    let reader = BufReader::with_capacity(BUF_CAPACITY, file);
+    read_source(path, reader, len, format, limits)
+}
+
+/// Reads a mesh from bytes in memory (`path` only names the source in errors).
+/// The same readers and checks as [`read_with_limits`], without the file system:
+/// for fuzzing and for callers that already hold the file.
+pub fn read_bytes(
+    path: &Path,
+    bytes: &[u8],
+    format: Format,
+    limits: &ReadLimits,
+) -> Result<RawMesh, IoError> {
+    let len = bytes.len() as u64;
+    if limits.max_file_bytes > 0 && len > limits.max_file_bytes {
+        return Err(malformed(
+            path,
+            None,
+            format!(
+                "the input has {len} bytes, over the configured limit max_file_bytes = {}",
+                limits.max_file_bytes
+            ),
+        ));
+    }
+    read_source(path, bytes, len, format, limits)
+}
+
+fn read_source<R: std::io::BufRead>(
+    path: &Path,
+    reader: R,
+    len: u64,
+    format: Format,
+    limits: &ReadLimits,
+) -> Result<RawMesh, IoError> {
     if len == 0 {
         return Err(malformed(path, None, "empty file"));
     }
-    let reader = BufReader::with_capacity(BUF_CAPACITY, file);
+    let caps = Caps::new(limits);
     let raw = match format {
-        Format::Obj => obj::read(path, reader)?,
-        Format::Ply => ply::read(path, reader, len)?,
-        Format::Stl => stl::read(path, reader, len)?,
-        Format::Off => off::read(path, reader, len)?,
+        Format::Obj => obj::read(path, reader, &caps)?,
+        Format::Ply => ply::read(path, reader, len, &caps)?,
+        Format::Stl => stl::read(path, reader, len, &caps)?,
+        Format::Off => off::read(path, reader, len, &caps)?,
     };
     check_read(path, &raw)?;
     Ok(raw)
@@ -325,6 +452,17 @@ pub(crate) fn write_real<W: Write>(w: &mut W, v: f64, f32: bool) -> std::io::Res
         } else {
             write!(w, "{v:e}")
         }
+    }
+}
+
+/// A colour component read from a file, as the `[0, 1]` value [`RawMesh::colors`]
+/// holds: clamped (NaN reads as 0), so that a finite `f64` too large for an `f32`
+/// or a value out of range never becomes a non-finite or out-of-range colour.
+pub(crate) fn unit_color(v: f64) -> f32 {
+    if v.is_nan() {
+        0.0
+    } else {
+        v.clamp(0.0, 1.0) as f32
     }
 }
 

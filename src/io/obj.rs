@@ -11,13 +11,13 @@
 
 use super::text::{has_nul, parse_coord, parse_f64, parse_i64, show, strip_comment, tokens};
 use super::text::{Lines, Next, MAX_LINE};
-use super::{io_error, malformed, IoError, Precision, RawMesh, MAX_ELEMENTS};
+use super::{io_error, malformed, unit_color, Caps, IoError, Precision, RawMesh, MAX_ELEMENTS};
 use glam::DVec3;
 use std::io::{BufRead, Write};
 use std::path::Path;
 
 /// Reads an OBJ file.
-pub(crate) fn read<R: BufRead>(path: &Path, reader: R) -> Result<RawMesh, IoError> {
+pub(crate) fn read<R: BufRead>(path: &Path, reader: R, caps: &Caps) -> Result<RawMesh, IoError> {
     let mut lines = Lines::new(reader);
     let mut raw = RawMesh {
         precision: Precision::F64,
@@ -36,7 +36,7 @@ pub(crate) fn read<R: BufRead>(path: &Path, reader: R) -> Result<RawMesh, IoErro
         let (ln, line) = match lines.next_line(MAX_LINE).map_err(|e| io_error(path, e))? {
             Next::Line(ln, l) => (ln, l),
             Next::Eof => break,
-            Next::TooLong(ln) => return Err(malformed(path, Some(ln), "line too long")),
+            Next::Bad(ln, why) => return Err(malformed(path, Some(ln), why)),
         };
         let bad = |msg: String| malformed(path, Some(ln), msg);
         if has_nul(line) {
@@ -45,8 +45,8 @@ pub(crate) fn read<R: BufRead>(path: &Path, reader: R) -> Result<RawMesh, IoErro
         let mut toks = tokens(strip_comment(line));
         match toks.next() {
             Some(b"v") => {
-                if raw.positions.len() as u64 >= MAX_ELEMENTS {
-                    return Err(bad(format!("more than {MAX_ELEMENTS} vertices")));
+                if raw.positions.len() as u64 >= caps.vertices() {
+                    return Err(bad(caps.vertex_msg(None)));
                 }
                 let mut vals = [0.0f64; 6];
                 let mut n = 0usize;
@@ -130,8 +130,8 @@ pub(crate) fn read<R: BufRead>(path: &Path, reader: R) -> Result<RawMesh, IoErro
                         1 => first = i,
                         2 => prev = i,
                         _ => {
-                            if raw.faces.len() as u64 >= MAX_ELEMENTS {
-                                return Err(bad(format!("more than {MAX_ELEMENTS} triangles")));
+                            if raw.faces.len() as u64 >= caps.faces() {
+                                return Err(bad(caps.face_msg(None)));
                             }
                             raw.faces.push([first, prev, i]);
                             prev = i;
@@ -174,6 +174,9 @@ pub(crate) fn read<R: BufRead>(path: &Path, reader: R) -> Result<RawMesh, IoErro
                 }
                 raw.notes
                     .push("OBJ vertex colours above 1 read as 0..255 and divided by 255".into());
+            }
+            for c in colors.iter_mut().flatten() {
+                *c = unit_color(f64::from(*c));
             }
             raw.colors = Some(colors);
         } else {
@@ -240,7 +243,7 @@ mod tests {
     use super::*;
 
     fn parse(s: &str) -> Result<RawMesh, IoError> {
-        read(Path::new("t.obj"), s.as_bytes())
+        read(Path::new("t.obj"), s.as_bytes(), &Caps::none())
     }
 
     #[test]

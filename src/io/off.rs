@@ -10,7 +10,7 @@
 
 use super::text::{has_nul, parse_coord, parse_f64, parse_i64, show, strip_comment, tokens};
 use super::text::{Lines, Next, MAX_LINE};
-use super::{color_byte, io_error, malformed, IoError, Precision, RawMesh, MAX_ELEMENTS};
+use super::{color_byte, io_error, malformed, unit_color, Caps, IoError, Precision, RawMesh};
 use glam::DVec3;
 use std::io::{BufRead, Write};
 use std::path::Path;
@@ -24,7 +24,7 @@ fn content_line<'a, R: BufRead>(
         // Re-borrow per iteration: the returned slice must come from the last call.
         let skip = match lines.next_line(MAX_LINE).map_err(|e| io_error(path, e))? {
             Next::Eof => return Ok(None),
-            Next::TooLong(ln) => return Err(malformed(path, Some(ln), "line too long")),
+            Next::Bad(ln, why) => return Err(malformed(path, Some(ln), why)),
             Next::Line(ln, l) => {
                 if has_nul(l) {
                     return Err(malformed(
@@ -70,7 +70,12 @@ fn take_counts<'t>(
 }
 
 /// Reads an OFF file of `len` bytes.
-pub(crate) fn read<R: BufRead>(path: &Path, reader: R, len: u64) -> Result<RawMesh, IoError> {
+pub(crate) fn read<R: BufRead>(
+    path: &Path,
+    reader: R,
+    len: u64,
+    caps: &Caps,
+) -> Result<RawMesh, IoError> {
     let mut lines = Lines::new(reader);
     let Some((ln, first)) = content_line(path, &mut lines)? else {
         return Err(malformed(path, None, "empty OFF file"));
@@ -132,10 +137,11 @@ pub(crate) fn read<R: BufRead>(path: &Path, reader: R, len: u64) -> Result<RawMe
     let [nv, nf] = counts;
     let remaining = len.saturating_sub(lines.consumed());
     let bad_counts = |m: String| malformed(path, Some(counts_line), m);
-    if nv > MAX_ELEMENTS || nf > MAX_ELEMENTS {
-        return Err(bad_counts(format!(
-            "{nv} vertices / {nf} faces exceed the limit of {MAX_ELEMENTS}"
-        )));
+    if nv > caps.vertices() {
+        return Err(bad_counts(caps.vertex_msg(Some(nv))));
+    }
+    if nf > caps.faces() {
+        return Err(bad_counts(caps.face_msg(Some(nf))));
     }
     // Shortest vertex line "0 0 0\n", shortest face line "3 0 0 0\n" (the last
     // line may lack its newline).
@@ -203,7 +209,7 @@ pub(crate) fn read<R: BufRead>(path: &Path, reader: R, len: u64) -> Result<RawMe
                 let v = parse_f64(tok)
                     .filter(|v| v.is_finite())
                     .ok_or_else(|| bad(format!("bad colour value '{}'", show(tok))))?;
-                *slot = if ints { (v / 255.0) as f32 } else { v as f32 };
+                *slot = unit_color(if ints { v / 255.0 } else { v });
             }
             colors.push(c);
         }
@@ -244,8 +250,8 @@ pub(crate) fn read<R: BufRead>(path: &Path, reader: R, len: u64) -> Result<RawMe
                 0 => first = v,
                 1 => prev = v,
                 _ => {
-                    if raw.faces.len() as u64 >= MAX_ELEMENTS {
-                        return Err(bad(format!("more than {MAX_ELEMENTS} triangles")));
+                    if raw.faces.len() as u64 >= caps.faces() {
+                        return Err(bad(caps.face_msg(None)));
                     }
                     raw.faces.push([first, prev, v]);
                     prev = v;

@@ -9,7 +9,7 @@
 
 use super::text::{has_nul, parse_coord, parse_coord_f32, parse_f64, parse_i64, show, tokens};
 use super::text::{Lines, Next, MAX_LINE};
-use super::{color_byte, MAX_ELEMENTS};
+use super::{color_byte, unit_color, Caps, MAX_ELEMENTS};
 use super::{io_error, malformed, read_error, Encoding, IoError, Precision, RawMesh};
 use glam::DVec3;
 use std::io::{BufRead, Read, Write};
@@ -54,6 +54,31 @@ impl Scalar {
     }
     fn is_int(self) -> bool {
         !matches!(self, Scalar::F32 | Scalar::F64)
+    }
+    /// The range of an integer type (`None` for floating-point types).
+    fn int_range(self) -> Option<(i64, i64)> {
+        Some(match self {
+            Scalar::I8 => (i8::MIN.into(), i8::MAX.into()),
+            Scalar::U8 => (0, u8::MAX.into()),
+            Scalar::I16 => (i16::MIN.into(), i16::MAX.into()),
+            Scalar::U16 => (0, u16::MAX.into()),
+            Scalar::I32 => (i32::MIN.into(), i32::MAX.into()),
+            Scalar::U32 => (0, u32::MAX.into()),
+            Scalar::F32 | Scalar::F64 => return None,
+        })
+    }
+    /// The type's name in a header.
+    fn name(self) -> &'static str {
+        match self {
+            Scalar::I8 => "char",
+            Scalar::U8 => "uchar",
+            Scalar::I16 => "short",
+            Scalar::U16 => "ushort",
+            Scalar::I32 => "int",
+            Scalar::U32 => "uint",
+            Scalar::F32 => "float",
+            Scalar::F64 => "double",
+        }
     }
     /// True when every value of the type is exactly an `f32`.
     fn fits_f32(self) -> bool {
@@ -115,7 +140,12 @@ enum Role {
 }
 
 /// Reads a PLY file of `len` bytes.
-pub(crate) fn read<R: BufRead>(path: &Path, reader: R, len: u64) -> Result<RawMesh, IoError> {
+pub(crate) fn read<R: BufRead>(
+    path: &Path,
+    reader: R,
+    len: u64,
+    caps: &Caps,
+) -> Result<RawMesh, IoError> {
     let mut lines = Lines::new(reader);
     let (encoding, elements) = read_header(path, &mut lines)?;
     let remaining = len.saturating_sub(lines.consumed());
@@ -130,11 +160,11 @@ pub(crate) fn read<R: BufRead>(path: &Path, reader: R, len: u64) -> Result<RawMe
             return Err(bad(format!("element '{}' has no properties", el.name)));
         }
         if el.name == "vertex" || el.name == "face" {
-            if el.count > MAX_ELEMENTS {
-                return Err(bad(format!(
-                    "{} '{}' elements exceed the limit of {MAX_ELEMENTS}",
-                    el.count, el.name
-                )));
+            if el.name == "vertex" && el.count > caps.vertices() {
+                return Err(bad(caps.vertex_msg(Some(el.count))));
+            }
+            if el.name == "face" && el.count > caps.faces() {
+                return Err(bad(caps.face_msg(Some(el.count))));
             }
             let slot = if el.name == "vertex" {
                 &mut vertex
@@ -293,7 +323,7 @@ pub(crate) fn read<R: BufRead>(path: &Path, reader: R, len: u64) -> Result<RawMe
         if k == vi {
             read_vertices(&mut body, el, &roles, &mut raw)?;
         } else if k == fi {
-            polygons = read_faces(&mut body, el, index_prop, vel.count, &mut raw)?;
+            polygons = read_faces(&mut body, el, index_prop, vel.count, caps, &mut raw)?;
         } else {
             for i in 0..el.count {
                 body.begin(i, el.count)?;
@@ -333,7 +363,16 @@ fn read_header<R: BufRead>(
         {
             Next::Line(ln, l) => (ln, l),
             Next::Eof => return Err(malformed(path, None, "the PLY header has no 'end_header'")),
-            Next::TooLong(ln) => return Err(malformed(path, Some(ln), "PLY header line too long")),
+            Next::Bad(ln, _) if first => {
+                return Err(malformed(
+                    path,
+                    Some(ln),
+                    "not a PLY file (the first line is not 'ply')",
+                ))
+            }
+            Next::Bad(ln, why) => {
+                return Err(malformed(path, Some(ln), format!("PLY header: {why}")))
+            }
         };
         let bad = |m: String| malformed(path, Some(ln), m);
         if first {
@@ -516,7 +555,8 @@ impl<R: BufRead> Body<'_, R> {
                         *line = ln;
                         return Ok(());
                     }
-                    Next::Eof | Next::TooLong(_) => {
+                    Next::Bad(ln, why) => return Err(malformed(self.path, Some(ln), why)),
+                    Next::Eof => {
                         return Err(malformed(
                             self.path,
                             None,
@@ -591,6 +631,10 @@ impl<R: BufRead> Body<'_, R> {
             Some(res) => res.map_err(|e| self.bin_err(e))?,
             None => {
                 // A value declared `float` is an f32: rounded once from the text.
+                if t.is_int() {
+                    // The header declares an integer: the text must be one.
+                    return self.int(t).map(|v| v as f64);
+                }
                 let r = self.token()?;
                 let tok = self.tok_bytes(r);
                 let v = if t == Scalar::F32 {
@@ -634,7 +678,20 @@ impl<R: BufRead> Body<'_, R> {
             None => {
                 let r = self.token()?;
                 let tok = self.tok_bytes(r);
-                parse_i64(tok).ok_or_else(|| self.err(format!("'{}' is not an integer", show(tok))))
+                let v = parse_i64(tok).ok_or_else(|| {
+                    self.err(format!(
+                        "'{}' is not an integer (the header declares {})",
+                        show(tok),
+                        t.name()
+                    ))
+                })?;
+                match t.int_range() {
+                    Some((lo, hi)) if v < lo || v > hi => Err(self.err(format!(
+                        "{v} is out of range for the declared type {}",
+                        t.name()
+                    ))),
+                    _ => Ok(v),
+                }
             }
         }
     }
@@ -702,7 +759,7 @@ fn color_value(v: f64, t: Scalar) -> f32 {
         Scalar::F32 | Scalar::F64 => v,
         _ => v / 255.0,
     };
-    c as f32
+    unit_color(c)
 }
 
 fn read_vertices<R: BufRead>(
@@ -711,7 +768,13 @@ fn read_vertices<R: BufRead>(
     roles: &[Role],
     raw: &mut RawMesh,
 ) -> Result<(), IoError> {
+    let layout = binary_vertex_layout(body, el, roles);
     for i in 0..el.count {
+        if let Some((layout, size)) = &layout {
+            if fast_vertex(body, layout, *size, raw) {
+                continue;
+            }
+        }
         body.begin(i, el.count)?;
         let mut p = DVec3::ZERO;
         let mut c = [0.0f32; 3];
@@ -735,16 +798,176 @@ fn read_vertices<R: BufRead>(
     Ok(())
 }
 
+/// Decodes a binary scalar from the start of `b` (None when `b` is too short).
+fn decode(b: &[u8], t: Scalar, be: bool) -> Option<f64> {
+    macro_rules! d {
+        ($t:ty) => {{
+            let a: [u8; std::mem::size_of::<$t>()] =
+                b.get(..std::mem::size_of::<$t>())?.try_into().ok()?;
+            if be {
+                <$t>::from_be_bytes(a)
+            } else {
+                <$t>::from_le_bytes(a)
+            }
+        }};
+    }
+    Some(match t {
+        Scalar::I8 => f64::from(d!(i8)),
+        Scalar::U8 => f64::from(d!(u8)),
+        Scalar::I16 => f64::from(d!(i16)),
+        Scalar::U16 => f64::from(d!(u16)),
+        Scalar::I32 => f64::from(d!(i32)),
+        Scalar::U32 => f64::from(d!(u32)),
+        Scalar::F32 => f64::from(d!(f32)),
+        Scalar::F64 => d!(f64),
+    })
+}
+
+/// Where one vertex property sits in a binary record: offset, type, role.
+type Field = (usize, Scalar, Role);
+
+/// For a binary vertex element of scalars only: each property's field and the
+/// record size (the fast path of [`read_vertices`]).
+fn binary_vertex_layout<R>(
+    body: &Body<'_, R>,
+    el: &Element,
+    roles: &[Role],
+) -> Option<(Vec<Field>, usize)> {
+    if !matches!(body.src, Src::Binary { .. }) {
+        return None;
+    }
+    let mut layout = Vec::with_capacity(el.props.len());
+    let mut off = 0usize;
+    for (p, &role) in el.props.iter().zip(roles) {
+        let Kind::Scalar(t) = p.kind else {
+            return None;
+        };
+        layout.push((off, t, role));
+        off += t.size() as usize;
+    }
+    Some((layout, off))
+}
+
+/// Binary fast path: decodes one vertex straight from the reader's buffer when the
+/// buffer holds the whole record and every value is valid; false (nothing consumed)
+/// otherwise, and the generic path reads it (and reports any error).
+fn fast_vertex<R: BufRead>(
+    body: &mut Body<'_, R>,
+    layout: &[Field],
+    size: usize,
+    raw: &mut RawMesh,
+) -> bool {
+    let Src::Binary { r, be } = &mut body.src else {
+        return false;
+    };
+    let be = *be;
+    let Ok(buf) = r.fill_buf() else {
+        return false;
+    };
+    let Some(rec) = buf.get(..size) else {
+        return false;
+    };
+    let mut p = DVec3::ZERO;
+    let mut c = [0.0f32; 3];
+    for &(off, t, role) in layout {
+        if role == Role::Skip {
+            continue;
+        }
+        let Some(v) = rec.get(off..).and_then(|b| decode(b, t, be)) else {
+            return false;
+        };
+        if !v.is_finite() {
+            return false;
+        }
+        match role {
+            Role::X => p.x = v,
+            Role::Y => p.y = v,
+            Role::Z => p.z = v,
+            Role::R => c[0] = color_value(v, t),
+            Role::G => c[1] = color_value(v, t),
+            Role::B => c[2] = color_value(v, t),
+            Role::Skip => {}
+        }
+    }
+    r.consume(size);
+    raw.positions.push(p);
+    if let Some(cs) = raw.colors.as_mut() {
+        cs.push(c);
+    }
+    true
+}
+
+/// Binary fast path for a face element of one `list uchar int|uint`: a triangle with
+/// indices in range, whole in the reader's buffer, is decoded in place; false
+/// (nothing consumed) for anything else, which the generic path reads.
+fn fast_triangle<R: BufRead>(
+    body: &mut Body<'_, R>,
+    num_vertices: u64,
+    caps: &Caps,
+    raw: &mut RawMesh,
+) -> bool {
+    let Src::Binary { r, be } = &mut body.src else {
+        return false;
+    };
+    let be = *be;
+    if raw.faces.len() as u64 >= caps.faces() {
+        return false;
+    }
+    let Ok(buf) = r.fill_buf() else {
+        return false;
+    };
+    let Some(rec) = buf.get(..13) else {
+        return false;
+    };
+    if rec.first() != Some(&3) {
+        return false;
+    }
+    let mut f = [0u32; 3];
+    for (k, slot) in f.iter_mut().enumerate() {
+        let Some(&[a, b, c, d]) = rec.get(1 + 4 * k..5 + 4 * k) else {
+            return false;
+        };
+        let w = [a, b, c, d];
+        // Signed or unsigned: a negative i32 is a huge u32, out of range either way.
+        let v = if be {
+            u32::from_be_bytes(w)
+        } else {
+            u32::from_le_bytes(w)
+        };
+        if u64::from(v) >= num_vertices {
+            return false;
+        }
+        *slot = v;
+    }
+    r.consume(13);
+    raw.faces.push(f);
+    true
+}
+
 /// Reads the faces; returns the number of polygons fanned.
 fn read_faces<R: BufRead>(
     body: &mut Body<'_, R>,
     el: &Element,
     index_prop: Option<usize>,
     num_vertices: u64,
+    caps: &Caps,
     raw: &mut RawMesh,
 ) -> Result<u64, IoError> {
     let mut polygons = 0;
+    // Binary fast path: a face element holding only a `list uchar int|uint` of indices.
+    let fast = matches!(body.src, Src::Binary { .. })
+        && index_prop == Some(0)
+        && matches!(
+            el.props.as_slice(),
+            [Prop {
+                kind: Kind::List(Scalar::U8, Scalar::I32 | Scalar::U32),
+                ..
+            }]
+        );
     for i in 0..el.count {
+        if fast && fast_triangle(body, num_vertices, caps, raw) {
+            continue;
+        }
         body.begin(i, el.count)?;
         for (k, prop) in el.props.iter().enumerate() {
             match prop.kind {
@@ -773,10 +996,8 @@ fn read_faces<R: BufRead>(
                             0 => first = v,
                             1 => prev = v,
                             _ => {
-                                if raw.faces.len() as u64 >= MAX_ELEMENTS {
-                                    return Err(
-                                        body.err(format!("more than {MAX_ELEMENTS} triangles"))
-                                    );
+                                if raw.faces.len() as u64 >= caps.faces() {
+                                    return Err(body.err(caps.face_msg(None)));
                                 }
                                 raw.faces.push([first, prev, v]);
                                 prev = v;

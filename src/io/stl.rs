@@ -10,42 +10,53 @@
 //! Facet normals and the attribute bytes are ignored on reading and recomputed on
 //! writing.
 
-use super::text::{has_nul, parse_coord, show, strip_comment, tokens, Lines, Next, MAX_LINE};
-use super::MAX_ELEMENTS;
+use super::text::{
+    has_nul, parse_coord, show, strip_comment, tokens, Lines, Next, MAX_LINE, UTF8_BOM,
+};
 use super::{io_error, malformed, read_error, Encoding, FastBuild, IoError, Precision, RawMesh};
+use super::{Caps, MAX_ELEMENTS};
 use glam::DVec3;
 use std::collections::HashMap;
 use std::io::{BufRead, Read, Write};
 use std::path::Path;
 
-/// Welds corners into vertices by exact position.
-struct Welder {
-    map: HashMap<[u64; 3], u32, FastBuild>,
+/// Welds corners into vertices by exact position. The key is the coordinates' bit
+/// pattern: `[u64; 3]` of `f64` (ASCII STL) or [`Key32`] of `f32` (binary STL, half
+/// the memory per entry, so the map stays in cache longer).
+struct Welder<K = [u64; 3]> {
+    map: HashMap<K, u32, FastBuild>,
     corners: u64,
+    max: u64,
 }
 
-impl Welder {
-    fn new(capacity: usize) -> Self {
+/// The exact position of a binary STL corner: `x | y << 32` and `z` as `f32` bits.
+#[derive(PartialEq, Eq, Clone, Copy)]
+struct Key32(u64, u32);
+
+impl std::hash::Hash for Key32 {
+    fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
+        state.write_u64(self.0);
+        state.write_u64(u64::from(self.1));
+    }
+}
+
+impl<K: std::hash::Hash + Eq> Welder<K> {
+    fn new(capacity: usize, max: u64) -> Self {
         Welder {
             map: HashMap::with_capacity_and_hasher(capacity, FastBuild::default()),
             corners: 0,
+            max: max.min(MAX_ELEMENTS),
         }
     }
 
-    /// The vertex at `p` (a new one when no earlier corner had exactly this position).
-    fn vertex(&mut self, p: DVec3, positions: &mut Vec<DVec3>) -> Option<u32> {
+    /// The vertex with key `key` at `p` (a new one when no earlier corner had it).
+    fn vertex_with(&mut self, key: K, p: DVec3, positions: &mut Vec<DVec3>) -> Option<u32> {
         self.corners += 1;
-        // `+ 0.0` turns -0.0 into +0.0 and leaves every other value unchanged.
-        let key = [
-            (p.x + 0.0).to_bits(),
-            (p.y + 0.0).to_bits(),
-            (p.z + 0.0).to_bits(),
-        ];
         let next = positions.len();
         match self.map.entry(key) {
             std::collections::hash_map::Entry::Occupied(e) => Some(*e.get()),
             std::collections::hash_map::Entry::Vacant(e) => {
-                if next as u64 >= MAX_ELEMENTS {
+                if next as u64 >= self.max {
                     return None;
                 }
                 positions.push(p);
@@ -61,6 +72,29 @@ impl Welder {
             self.corners,
             raw.positions.len()
         ));
+    }
+}
+
+impl Welder<[u64; 3]> {
+    /// The vertex at `p` (a new one when no earlier corner had exactly this position).
+    fn vertex(&mut self, p: DVec3, positions: &mut Vec<DVec3>) -> Option<u32> {
+        // `+ 0.0` turns -0.0 into +0.0 and leaves every other value unchanged.
+        let key = [
+            (p.x + 0.0).to_bits(),
+            (p.y + 0.0).to_bits(),
+            (p.z + 0.0).to_bits(),
+        ];
+        self.vertex_with(key, p, positions)
+    }
+}
+
+impl Welder<Key32> {
+    /// The vertex at the (finite) `f32` position `p`.
+    fn vertex32(&mut self, p: [f32; 3], positions: &mut Vec<DVec3>) -> Option<u32> {
+        let [x, y, z] = p.map(|c| (c + 0.0).to_bits());
+        let key = Key32(u64::from(x) | u64::from(y) << 32, z);
+        let pos = DVec3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
+        self.vertex_with(key, pos, positions)
     }
 }
 
@@ -83,7 +117,12 @@ fn text_facets_follow(head: &[u8]) -> bool {
 }
 
 /// Reads an STL file of `len` bytes.
-pub(crate) fn read<R: BufRead>(path: &Path, mut reader: R, len: u64) -> Result<RawMesh, IoError> {
+pub(crate) fn read<R: BufRead>(
+    path: &Path,
+    mut reader: R,
+    len: u64,
+    caps: &Caps,
+) -> Result<RawMesh, IoError> {
     let mut head = Vec::with_capacity(84);
     (&mut reader)
         .take(84)
@@ -94,17 +133,19 @@ pub(crate) fn read<R: BufRead>(path: &Path, mut reader: R, len: u64) -> Result<R
         _ => None,
     };
     let is_solid = head
+        .strip_prefix(UTF8_BOM)
+        .unwrap_or(&head)
         .trim_ascii_start()
         .get(..5)
         .is_some_and(|s| s.eq_ignore_ascii_case(b"solid"));
     if let Some(n) = count {
         if 84 + 50 * u64::from(n) == len && !(is_solid && text_facets_follow(&head)) {
-            return read_binary(path, reader, n);
+            return read_binary(path, reader, n, caps);
         }
     }
     if is_solid {
         let chained = std::io::Read::chain(head.as_slice(), reader);
-        return read_ascii(path, chained).map_err(|e| match (e, count) {
+        return read_ascii(path, chained, caps).map_err(|e| match (e, count) {
             (
                 IoError::Malformed {
                     path,
@@ -142,7 +183,15 @@ pub(crate) fn read<R: BufRead>(path: &Path, mut reader: R, len: u64) -> Result<R
     }
 }
 
-fn read_binary<R: Read>(path: &Path, mut reader: R, n: u32) -> Result<RawMesh, IoError> {
+fn read_binary<R: Read>(
+    path: &Path,
+    mut reader: R,
+    n: u32,
+    caps: &Caps,
+) -> Result<RawMesh, IoError> {
+    if u64::from(n) > caps.faces() {
+        return Err(malformed(path, None, caps.face_msg(Some(u64::from(n)))));
+    }
     let mut raw = RawMesh {
         precision: Precision::F32,
         encoding: Encoding::BinaryLittleEndian,
@@ -152,12 +201,12 @@ fn read_binary<R: Read>(path: &Path, mut reader: R, n: u32) -> Result<RawMesh, I
     // by data (a closed surface has about half as many vertices as triangles).
     raw.faces.reserve(n as usize);
     raw.positions.reserve(n as usize / 2 + 3);
-    let mut welder = Welder::new(n as usize / 2 + 3);
+    let mut welder = Welder::<Key32>::new(n as usize / 2 + 3, caps.vertices());
     let mut rec = [0u8; 50];
-    let f = |rec: &[u8; 50], o: usize| -> f64 {
+    let f = |rec: &[u8; 50], o: usize| -> f32 {
         match rec.get(o..o + 4) {
-            Some(&[a, b, c, d]) => f64::from(f32::from_le_bytes([a, b, c, d])),
-            _ => f64::NAN,
+            Some(&[a, b, c, d]) => f32::from_le_bytes([a, b, c, d]),
+            _ => f32::NAN,
         }
     };
     for t in 0..n {
@@ -167,17 +216,18 @@ fn read_binary<R: Read>(path: &Path, mut reader: R, n: u32) -> Result<RawMesh, I
         let mut face = [0u32; 3];
         for (k, slot) in face.iter_mut().enumerate() {
             let o = 12 + 12 * k;
-            let p = DVec3::new(f(&rec, o), f(&rec, o + 4), f(&rec, o + 8));
-            if !p.is_finite() {
+            let p = [f(&rec, o), f(&rec, o + 4), f(&rec, o + 8)];
+            if !p.iter().all(|c| c.is_finite()) {
+                let p = glam::Vec3::from_array(p);
                 return Err(malformed(
                     path,
                     None,
                     format!("triangle {t}: non-finite coordinate {p} (NaN and infinity are not allowed)"),
                 ));
             }
-            *slot = welder.vertex(p, &mut raw.positions).ok_or_else(|| {
-                malformed(path, None, format!("more than {MAX_ELEMENTS} vertices"))
-            })?;
+            *slot = welder
+                .vertex32(p, &mut raw.positions)
+                .ok_or_else(|| malformed(path, None, caps.vertex_msg(None)))?;
         }
         raw.faces.push(face);
     }
@@ -185,14 +235,14 @@ fn read_binary<R: Read>(path: &Path, mut reader: R, n: u32) -> Result<RawMesh, I
     Ok(raw)
 }
 
-fn read_ascii<R: BufRead>(path: &Path, reader: R) -> Result<RawMesh, IoError> {
+fn read_ascii<R: BufRead>(path: &Path, reader: R, caps: &Caps) -> Result<RawMesh, IoError> {
     let mut raw = RawMesh {
         precision: Precision::F64,
         encoding: Encoding::Ascii,
         ..RawMesh::default()
     };
     let mut lines = Lines::new(reader);
-    let mut welder = Welder::new(1024);
+    let mut welder = Welder::new(1024, caps.vertices());
     let mut in_facet = false;
     let mut in_loop = false;
     let mut corners: Vec<u32> = Vec::with_capacity(4);
@@ -201,7 +251,7 @@ fn read_ascii<R: BufRead>(path: &Path, reader: R) -> Result<RawMesh, IoError> {
         let (ln, line) = match lines.next_line(MAX_LINE).map_err(|e| io_error(path, e))? {
             Next::Line(ln, l) => (ln, l),
             Next::Eof => break,
-            Next::TooLong(ln) => return Err(malformed(path, Some(ln), "line too long")),
+            Next::Bad(ln, why) => return Err(malformed(path, Some(ln), why)),
         };
         let bad = |m: String| malformed(path, Some(ln), m);
         if has_nul(line) {
@@ -245,7 +295,7 @@ fn read_ascii<R: BufRead>(path: &Path, reader: R) -> Result<RawMesh, IoError> {
             }
             let v = welder
                 .vertex(DVec3::from_array(c), &mut raw.positions)
-                .ok_or_else(|| bad(format!("more than {MAX_ELEMENTS} vertices")))?;
+                .ok_or_else(|| bad(caps.vertex_msg(None)))?;
             corners.push(v);
         } else if is(b"endloop") {
             if !in_loop {
@@ -271,8 +321,8 @@ fn read_ascii<R: BufRead>(path: &Path, reader: R) -> Result<RawMesh, IoError> {
             }
             for w in rest.windows(2) {
                 if let [b, c] = *w {
-                    if raw.faces.len() as u64 >= MAX_ELEMENTS {
-                        return Err(bad(format!("more than {MAX_ELEMENTS} triangles")));
+                    if raw.faces.len() as u64 >= caps.faces() {
+                        return Err(bad(caps.face_msg(None)));
                     }
                     raw.faces.push([a, b, c]);
                 }
@@ -390,7 +440,7 @@ mod tests {
     #[test]
     fn welder_merges_signed_zeros_only() {
         let mut pos = Vec::new();
-        let mut w = Welder::new(4);
+        let mut w = Welder::new(4, MAX_ELEMENTS);
         let a = w.vertex(DVec3::new(0.0, 1.0, 2.0), &mut pos);
         let b = w.vertex(DVec3::new(-0.0, 1.0, 2.0), &mut pos);
         let c = w.vertex(DVec3::new(f64::from(0.1f32), 1.0, 2.0), &mut pos);

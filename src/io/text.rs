@@ -9,6 +9,9 @@ use std::io::{BufRead, Read};
 /// vertices still fits).
 pub(crate) const MAX_LINE: u64 = 64 << 20;
 
+/// The UTF-8 byte order mark, skipped at the start of text files.
+pub(crate) const UTF8_BOM: &[u8] = b"\xEF\xBB\xBF";
+
 /// A line reader over a buffered source that counts lines (1-based) and bytes.
 pub(crate) struct Lines<R> {
     inner: R,
@@ -23,8 +26,9 @@ pub(crate) enum Next<'a> {
     Line(usize, &'a [u8]),
     /// The end of the file.
     Eof,
-    /// A line longer than the allowed maximum (its number).
-    TooLong(usize),
+    /// A line that cannot be text of a mesh file (its number and why): longer than
+    /// the allowed maximum, or holding a carriage return that does not end it.
+    Bad(usize, &'static str),
 }
 
 impl<R: BufRead> Lines<R> {
@@ -79,8 +83,12 @@ impl<R: BufRead> Lines<R> {
         }
         self.consumed += n as u64;
         self.line += 1;
+        if self.line == 1 && self.buf.starts_with(UTF8_BOM) {
+            // A UTF-8 byte order mark before the first line is not content.
+            self.buf.drain(..UTF8_BOM.len());
+        }
         if n as u64 > max && self.buf.last() != Some(&b'\n') {
-            return Ok(Next::TooLong(self.line));
+            return Ok(Next::Bad(self.line, "line too long"));
         }
         let mut s: &[u8] = &self.buf;
         if let Some(t) = s.strip_suffix(b"\n") {
@@ -88,6 +96,13 @@ impl<R: BufRead> Lines<R> {
         }
         if let Some(t) = s.strip_suffix(b"\r") {
             s = t;
+        }
+        // (Binary data, with NUL bytes, is left to the readers to report as such.)
+        if s.contains(&b'\r') && !has_nul(s) {
+            return Ok(Next::Bad(
+                self.line,
+                "carriage return inside a line (CR-only line endings are not supported; use LF or CRLF)",
+            ));
         }
         Ok(Next::Line(self.line, s))
     }
@@ -129,9 +144,31 @@ pub(crate) fn parse_f64(tok: &[u8]) -> Option<f64> {
     std::str::from_utf8(tok).ok()?.parse::<f64>().ok()
 }
 
-/// Parses a decimal integer.
+/// Parses a decimal integer (optional sign, then digits; `None` on overflow), as
+/// `str::parse::<i64>` does, without the UTF-8 check (a hot path: OBJ indices).
 pub(crate) fn parse_i64(tok: &[u8]) -> Option<i64> {
-    std::str::from_utf8(tok).ok()?.parse::<i64>().ok()
+    let (neg, digits) = match tok.split_first()? {
+        (b'-', rest) => (true, rest),
+        (b'+', rest) => (false, rest),
+        _ => (false, tok),
+    };
+    if digits.is_empty() {
+        return None;
+    }
+    let mut v: i64 = 0;
+    for &d in digits {
+        if !d.is_ascii_digit() {
+            return None;
+        }
+        let d = i64::from(d - b'0');
+        // Accumulate negatively so that i64::MIN parses.
+        v = v.checked_mul(10)?.checked_sub(d)?;
+    }
+    if neg {
+        Some(v)
+    } else {
+        v.checked_neg()
+    }
 }
 
 /// Parses a finite coordinate, or says what is wrong with the token.
@@ -156,5 +193,38 @@ fn check_coord(tok: &[u8], v: Option<f64>) -> Result<f64, String> {
             show(tok)
         )),
         None => Err(format!("'{}' is not a number", show(tok))),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn parse_i64_matches_std() {
+        for t in [
+            "0",
+            "-0",
+            "+7",
+            "42",
+            "-42",
+            "9223372036854775807",
+            "-9223372036854775808",
+            "9223372036854775808",
+            "-9223372036854775809",
+            "",
+            "-",
+            "+",
+            "1a",
+            "--1",
+            "+-1",
+            " 1",
+            "\u{661}",
+            "00012",
+        ] {
+            assert_eq!(
+                super::parse_i64(t.as_bytes()),
+                t.parse::<i64>().ok(),
+                "{t:?}"
+            );
+        }
     }
 }
