@@ -200,10 +200,20 @@ pub fn fill_hole(
             policy,
             deadline: Deadline::after_ms(policy.limits.hole_time_ms),
         };
-        let result = run_method(method, &ctx).and_then(|p| {
-            ctx.deadline.check()?;
-            Ok(p)
-        });
+        // a method that panics (a bug, or a solver that panics on singular input)
+        // fails over like any other failure: one bad hole never takes the file down
+        let result =
+            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run_method(method, &ctx)))
+                .unwrap_or_else(|_| {
+                    Err(FillError::Failed(format!(
+                        "internal error in {}",
+                        method.name()
+                    )))
+                })
+                .and_then(|p| {
+                    ctx.deadline.check()?;
+                    Ok(p)
+                });
         let attempt = |outcome, reason: String| Attempt {
             method,
             outcome,

@@ -1200,6 +1200,14 @@ impl<'a> Builder<'a> {
 
     /// True when no two patch triangles overlap and none overlaps the mesh.
     fn patch_is_clean(&self, pos: &[DVec3], tris: &[[u32; 3]]) -> bool {
+        // the dispatcher's degenerate-triangle rule first (fairing can make slivers)
+        let patch = Patch {
+            new_vertices: Vec::new(),
+            triangles: tris.to_vec(),
+        };
+        if crate::check::check_degenerate(pos, &patch, &self.ctx.policy.checks).is_err() {
+            return false;
+        }
         let mut ob = Obstacles::new(2.0 * self.cell);
         for t in &self.mesh_tris {
             ob.add(*t);
