@@ -187,8 +187,19 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
         .map_err(io_failure)?;
     let read_ms = t.elapsed().as_secs_f64() * 1000.0;
 
-    let (out, mut report) = holefill::repair(&raw, &policy)
-        .map_err(|e| Failure(exit::DATAERR, format!("{}: {e}", args.input.display())))?;
+    // an internal error (a bug) must still end in a clear message and EX_SOFTWARE,
+    // with nothing written, rather than an abort
+    let repaired = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        holefill::repair(&raw, &policy)
+    }))
+    .map_err(|_| {
+        Failure(
+            exit::SOFTWARE,
+            format!("{}: internal error while repairing", args.input.display()),
+        )
+    })?;
+    let (out, mut report) =
+        repaired.map_err(|e| Failure(exit::DATAERR, format!("{}: {e}", args.input.display())))?;
     report.timings.read_ms = read_ms;
     report.input = Some(FileRef {
         path: args.input.display().to_string(),
