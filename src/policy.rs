@@ -187,6 +187,9 @@ pub struct Fair {
     pub continuity: u8,
     /// Laplacian weights (cotangent falls back to uniform on degenerate angles).
     pub weights: Weights,
+    /// Tangential relaxation steps applied to every patch after its method (0: off);
+    /// evens out the triangles without moving the faired surface.
+    pub tangential_relax: usize,
 }
 
 impl Default for Fair {
@@ -194,6 +197,7 @@ impl Default for Fair {
         Fair {
             continuity: 2,
             weights: Weights::Cotangent,
+            tangential_relax: 100,
         }
     }
 }
@@ -586,7 +590,7 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
     ),
     ("clean", &["remove_teeth", "split_long_edges"]),
     ("refine", &["density", "weight", "restricted_search_above"]),
-    ("fair", &["continuity", "weights"]),
+    ("fair", &["continuity", "weights", "tangential_relax"]),
     (
         "front",
         &[
@@ -864,6 +868,16 @@ impl Policy {
             return Err(Invalid::new(
                 "fair.continuity",
                 continuity_message(u64::from(self.fair.continuity)),
+            ));
+        }
+
+        if self.fair.tangential_relax > MAX_SMOOTH_ITERATIONS {
+            return Err(Invalid::new(
+                "fair.tangential_relax",
+                format!(
+                    "must be at most {MAX_SMOOTH_ITERATIONS} (got {})",
+                    self.fair.tangential_relax
+                ),
             ));
         }
 
@@ -1301,6 +1315,7 @@ impl Reader<'_> {
                     .map_err(|_| self.error(v.span(), key, continuity_message(n)))?;
             }
             ("fair", "weights") => p.fair.weights = self.named(key, v)?,
+            ("fair", "tangential_relax") => p.fair.tangential_relax = self.usize(key, v)?,
             ("front", "angle_small") => p.front.angle_small = self.float(key, v)?,
             ("front", "angle_large") => p.front.angle_large = self.float(key, v)?,
             ("front", "alpha") => p.front.alpha = self.float(key, v)?,
@@ -2011,7 +2026,7 @@ mod tests {
                 border: Border { max_vertices, max_bbox_share, only_longest },
                 clean: Clean { remove_teeth, split_long_edges },
                 refine: Refine { density, weight, restricted_search_above },
-                fair: Fair { continuity, weights: fair_weights },
+                fair: Fair { continuity, weights: fair_weights, tangential_relax: 100 },
                 front: Front {
                     angle_small: angles.0, angle_large: angles.1, alpha, omega1, merge_distance,
                     max_steps_per_vertex, fair: front_fair,

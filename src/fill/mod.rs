@@ -13,6 +13,7 @@ pub mod geom;
 pub mod hpde;
 pub mod lssvm_poisson;
 pub mod min_area_fair;
+pub mod relax;
 pub mod wavefront;
 
 use crate::check::Checker;
@@ -233,6 +234,18 @@ pub fn fill_hole(
                 rep.tried.push(attempt(Outcome::Error, why));
                 continue;
             }
+        };
+        // even out the triangles tangentially; keep that only if it passes the checks
+        let mut relaxed = patch.clone();
+        relax::tangential_relax(mesh, hole, &mut relaxed, policy.fair.tangential_relax, 0.5);
+        let patch = if relaxed != patch
+            && checker
+                .check_patch(mesh, &hole.vertices, &relaxed, &policy.checks)
+                .is_ok()
+        {
+            relaxed
+        } else {
+            patch
         };
         let quality = match checker.check_patch(mesh, &hole.vertices, &patch, &policy.checks) {
             Ok(q) => q,
