@@ -111,9 +111,31 @@ impl Checker {
         let pos = patch_positions(mesh, hole, patch);
         check_degenerate(&pos, patch, opts)?;
         if opts.self_intersection {
-            self.check_intersections(mesh, hole, patch, &pos)?;
+            self.check_intersections(mesh, hole, patch, &pos, true)?;
         }
         Ok(quality(&pos, hole.len(), patch))
+    }
+
+    /// For a patch that passed [`Checker::check_patch`] against the mesh this checker
+    /// was built on: checks it against the faces added since (the patches of other
+    /// holes). The topology and degeneracy checks do not depend on them (loops are
+    /// vertex-disjoint), so only intersections are tested.
+    pub fn check_against_added(
+        &self,
+        mesh: &Mesh,
+        hole: &[VertexId],
+        patch: &Patch,
+        opts: &Checks,
+    ) -> Result<(), CheckFailure> {
+        if !opts.self_intersection
+            || self.levels.is_empty()
+                && self.tail.is_empty()
+                && self.next_unseen >= mesh.num_faces()
+        {
+            return Ok(());
+        }
+        let pos = patch_positions(mesh, hole, patch);
+        self.check_intersections(mesh, hole, patch, &pos, false)
     }
 
     /// Records that the faces in `faces` (indices into the mesh) were added. Faces
@@ -148,6 +170,7 @@ impl Checker {
         hole: &[VertexId],
         patch: &Patch,
         pos: &[DVec3],
+        against_base: bool,
     ) -> Result<(), CheckFailure> {
         let k = hole.len();
         let keys: Vec<u64> = (0..pos.len())
@@ -166,8 +189,13 @@ impl Checker {
             .collect();
         let boxes: Vec<(DVec3, DVec3)> = tris.iter().map(|(p, _)| tri_box(p)).collect();
         // patch against patch
-        let ptree = Bvh::build(tris.len(), |i| boxes[i]);
-        for (i, (p, pk)) in tris.iter().enumerate() {
+        // (already done when the patch was checked against the base)
+        let ptree = if against_base {
+            Bvh::build(tris.len(), |i| boxes[i])
+        } else {
+            Bvh::default()
+        };
+        for (i, (p, pk)) in tris.iter().enumerate().filter(|_| against_base) {
             let mut hit = None;
             ptree.query(boxes[i].0, boxes[i].1, |j| {
                 if j > i && boxes_meet(boxes[i].0, boxes[i].1, boxes[j].0, boxes[j].1) {
@@ -200,7 +228,7 @@ impl Checker {
                 }
                 false
             };
-            let found = self.base.query(lo, hi, &mut test)
+            let found = (against_base && self.base.query(lo, hi, &mut test))
                 || self
                     .levels
                     .iter()
@@ -1227,6 +1255,63 @@ mod tests {
         };
         let f: usize = what.strip_prefix("mesh face ").unwrap().parse().unwrap();
         assert!(f >= m.num_faces() - 8);
+    }
+
+    #[test]
+    fn a_proposal_that_meets_an_earlier_patch_fails_over_to_the_next_method() {
+        // the parallel phase checked the tall fan on the lower hole against the mesh
+        // as read (clean); the upper hole's lid was accepted first, and the fan pokes
+        // through it: the serial phase must reject it and try the next method
+        let mut raw = RawMesh::default();
+        grid(6, 0.0, 0, &HOLE, &mut raw);
+        grid(6, 0.3, 49, &HOLE, &mut raw);
+        let (mut m, _) = Mesh::from_raw(&raw);
+        let lower = hole_at(&m, 0.0);
+        let upper = hole_at(&m, 0.3);
+        let policy = crate::policy::Policy::default();
+        let mut chk = Checker::new(&m);
+        let tall = fan(&lower, v(3., 3., 1.0));
+        let q = chk.check_patch(&m, &lower, &tall, &checks()).unwrap();
+        // nothing added yet: nothing to meet
+        chk.check_against_added(&m, &lower, &tall, &checks())
+            .unwrap();
+        let up = crate::fill::Hole::new(1, &m, upper, &policy);
+        let lid = crate::fill::fill_hole(&mut m, &up, &policy, &mut chk);
+        assert_eq!(lid.status, crate::report::HoleStatus::Filled);
+        m.validate().unwrap();
+        let e = chk
+            .check_against_added(&m, &lower, &tall, &checks())
+            .unwrap_err();
+        assert!(matches!(e, CheckFailure::SelfIntersection(..)), "{e}");
+        let low = crate::fill::Hole::new(0, &m, lower, &policy);
+        let methods = crate::fill::methods_for(&policy, low.class).to_vec();
+        assert!(methods.len() >= 2);
+        let proposal = crate::fill::Proposal {
+            tried: Vec::new(),
+            accepted: Some((0, tall, q, 0.0)),
+            ms: 0.0,
+        };
+        let rep = crate::fill::finish_hole(&mut m, &low, &policy, &mut chk, proposal);
+        m.validate().unwrap();
+        assert_eq!(
+            rep.status,
+            crate::report::HoleStatus::Filled,
+            "{}",
+            rep.reason
+        );
+        assert_eq!(rep.tried[0].method, methods[0]);
+        assert_eq!(rep.tried[0].outcome, crate::report::Outcome::Rejected);
+        assert!(
+            rep.tried[0].reason.contains("intersects mesh face"),
+            "{}",
+            rep.tried[0].reason
+        );
+        assert_eq!(rep.method, Some(methods[1]));
+        assert_eq!(
+            m.topo.boundary_loops().len(),
+            2,
+            "only the sheets' outer borders"
+        );
     }
 
     #[test]

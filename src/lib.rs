@@ -232,19 +232,31 @@ fn fill_all(mesh: &mut Mesh, policy: &Policy, degenerate: &mut usize) -> Vec<Hol
         }
     }
     let mut checker = check::Checker::new(mesh);
+    // which holes to fill, and which rule skips the others
+    let skip: Vec<Option<String>> = holes
+        .iter()
+        .enumerate()
+        .map(|(i, hole)| {
+            border_rule(
+                mesh,
+                hole,
+                policy,
+                diag,
+                longest.get(&loop_comp[i]) == Some(&i),
+            )
+        })
+        .collect();
+    // phase 1, in parallel: every hole's first acceptable patch against the mesh as it
+    // is now (read-only); phase 2, serial in hole order: check each against the
+    // patches accepted before it and apply it. The output does not depend on threads.
+    let proposals = propose_all(mesh, &holes, &skip, policy, &checker);
     let mut out = Vec::with_capacity(holes.len());
-    for (i, hole) in holes.iter().enumerate() {
+    for ((hole, rule), proposal) in holes.iter().zip(skip).zip(proposals) {
         if hole.len() < 3 {
             *degenerate += 1;
         }
-        if let Some(rule) = border_rule(
-            mesh,
-            hole,
-            policy,
-            diag,
-            longest.get(&loop_comp[i]) == Some(&i),
-        ) {
-            out.push(HoleReport {
+        match (rule, proposal) {
+            (Some(rule), _) => out.push(HoleReport {
                 id: hole.id,
                 boundary_vertices: hole.len(),
                 perimeter: hole.perimeter,
@@ -258,12 +270,45 @@ fn fill_all(mesh: &mut Mesh, policy: &Policy, degenerate: &mut usize) -> Vec<Hol
                 added_faces: 0,
                 quality: None,
                 ms: 0.0,
-            });
-            continue;
+            }),
+            (None, Some(p)) => out.push(fill::finish_hole(mesh, hole, policy, &mut checker, p)),
+            (None, None) => out.push(fill::fill_hole(mesh, hole, policy, &mut checker)),
         }
-        out.push(fill::fill_hole(mesh, hole, policy, &mut checker));
     }
     out
+}
+
+/// Phase 1 of [`fill_all`]: the proposals of the holes not skipped (`None` for those),
+/// computed on `policy.limits.threads` threads, biggest holes first.
+fn propose_all(
+    mesh: &Mesh,
+    holes: &[Hole],
+    skip: &[Option<String>],
+    policy: &Policy,
+    checker: &check::Checker,
+) -> Vec<Option<fill::Proposal>> {
+    use rayon::prelude::*;
+    let mut order: Vec<usize> = (0..holes.len()).filter(|&i| skip[i].is_none()).collect();
+    order.sort_by_key(|&i| std::cmp::Reverse(holes[i].len()));
+    let run = |i: usize| fill::propose(mesh, &holes[i], policy, checker, 0);
+    let threads = match policy.limits.threads {
+        0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
+        n => n,
+    };
+    let computed: Vec<fill::Proposal> = if threads <= 1 || order.len() <= 1 {
+        order.iter().map(|&i| run(i)).collect()
+    } else {
+        match rayon::ThreadPoolBuilder::new().num_threads(threads).build() {
+            Ok(pool) => pool.install(|| order.par_iter().map(|&i| run(i)).collect()),
+            // no threads to be had: the same work, serially
+            Err(_) => order.iter().map(|&i| run(i)).collect(),
+        }
+    };
+    let mut slots: Vec<Option<fill::Proposal>> = vec![None; holes.len()];
+    for (i, p) in order.into_iter().zip(computed) {
+        slots[i] = Some(p);
+    }
+    slots
 }
 
 /// The outer-border rule: `Some(reason)` when the loop is skipped.

@@ -425,12 +425,16 @@ impl Default for Checks {
 pub struct Limits {
     /// Per method attempt on one hole, in milliseconds; past it the next method is tried.
     pub hole_time_ms: u64,
+    /// Threads that fill independent holes at once (0: one per core). The output
+    /// does not depend on it.
+    pub threads: usize,
 }
 
 impl Default for Limits {
     fn default() -> Self {
         Limits {
             hole_time_ms: 10_000,
+            threads: 0,
         }
     }
 }
@@ -632,7 +636,7 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
         ],
     ),
     ("checks", &["self_intersection", "min_angle_deg"]),
-    ("limits", &["hole_time_ms"]),
+    ("limits", &["hole_time_ms", "threads"]),
     (
         "smooth",
         &[
@@ -662,6 +666,9 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
 pub const MAX_POLICY_BYTES: u64 = 1 << 20;
 /// Largest `refine.restricted_search_above`: the full search takes O(k^2) memory.
 pub const MAX_FULL_SEARCH: usize = 2000;
+/// Largest `limits.threads`.
+pub const MAX_THREADS: usize = 1024;
+
 /// Largest `limits.hole_time_ms` (one day).
 pub const MAX_HOLE_TIME_MS: u64 = 86_400_000;
 /// Largest `smooth.iterations` (and `hpde.num_smooth`).
@@ -994,6 +1001,13 @@ impl Policy {
                 format!(
                     "must be 0 (no limit) or between 1 and {MAX_HOLE_TIME_MS} (one day) (got {ms})"
                 ),
+            ));
+        }
+        let threads = self.limits.threads;
+        if threads > MAX_THREADS {
+            return Err(Invalid::new(
+                "limits.threads",
+                format!("must be 0 (one per core) or between 1 and {MAX_THREADS} (got {threads})"),
             ));
         }
 
@@ -1355,6 +1369,7 @@ impl Reader<'_> {
             ("checks", "self_intersection") => p.checks.self_intersection = self.boolean(key, v)?,
             ("checks", "min_angle_deg") => p.checks.min_angle_deg = self.float(key, v)?,
             ("limits", "hole_time_ms") => p.limits.hole_time_ms = self.uint(key, v)?,
+            ("limits", "threads") => p.limits.threads = self.usize(key, v)?,
             ("smooth", "enabled") => p.smooth.enabled = self.boolean(key, v)?,
             ("smooth", "iterations") => p.smooth.iterations = self.usize(key, v)?,
             ("smooth", "lambda") => p.smooth.lambda = self.float(key, v)?,
@@ -1647,7 +1662,10 @@ mod tests {
     fn unknown_key_without_close_match_lists_or_places_it() {
         let e = err("[limits]\nbananas = 3\n");
         assert_eq!(e.line, Some(2));
-        assert_eq!(e.message, "unknown key; [limits] has `hole_time_ms`");
+        assert_eq!(
+            e.message,
+            "unknown key; [limits] has `hole_time_ms`, `threads`"
+        );
         let e = err("[front]\nonly_longest = true\n");
         assert_eq!(
             e.message,
@@ -2034,7 +2052,7 @@ mod tests {
                 wavefront: Wavefront::default(),
                 hpde,
                 checks: Checks { self_intersection, min_angle_deg },
-                limits: Limits { hole_time_ms },
+                limits: Limits { hole_time_ms, ..Limits::default() },
                 smooth: Smooth {
                     enabled, iterations, lambda: lm.0, mu: lm.1, weights: smooth_weights, scope, rings, boundary,
                 },

@@ -239,3 +239,68 @@ fn check_policy_accepts_the_shipped_policy() {
         String::from_utf8_lossy(&o.stderr)
     );
 }
+
+#[test]
+fn parallel_filling_gives_the_serial_output_byte_for_byte() {
+    // many holes of every class on one sphere, filled on 1 and on 4 threads
+    let dir = tempdir();
+    let mut s = icosphere(4);
+    let centres: [[f64; 4]; 8] = [
+        [0.0, 0.0, 1.0, 0.05],
+        [1.0, 0.0, 0.0, 0.25],
+        [0.0, -0.6, -0.8, 0.5],
+        [-1.0, 0.0, 0.0, 0.15],
+        [0.0, 1.0, 0.0, 0.3],
+        [0.6, 0.6, 0.5, 0.12],
+        [-0.6, -0.6, 0.5, 0.2],
+        [0.0, 0.0, -1.0, 0.08],
+    ];
+    for c in centres {
+        let n = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+        s = cut(&s, [c[0] / n, c[1] / n, c[2] / n], c[3]).0;
+    }
+    let inp = dir.path().join("many.obj");
+    write_obj(&inp, &s);
+    let mut outs = Vec::new();
+    for threads in [1, 4] {
+        let pol = dir.path().join(format!("t{threads}.toml"));
+        std::fs::write(&pol, format!("[limits]\nthreads = {threads}\n")).unwrap();
+        let out = dir.path().join(format!("out{threads}.obj"));
+        let rep = dir.path().join(format!("rep{threads}.json"));
+        let o = run(&[
+            "fill",
+            inp.to_str().unwrap(),
+            out.to_str().unwrap(),
+            "--policy",
+            pol.to_str().unwrap(),
+            "--report",
+            rep.to_str().unwrap(),
+            "-q",
+        ]);
+        assert_eq!(
+            o.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let log: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+        let holes: Vec<(String, String, u64)> = log["holes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|h| {
+                (
+                    h["status"].to_string(),
+                    h["method"].to_string(),
+                    h["added_faces"].as_u64().unwrap(),
+                )
+            })
+            .collect();
+        assert_eq!(holes.len(), centres.len());
+        outs.push((std::fs::read(&out).unwrap(), holes));
+    }
+    assert_eq!(outs[0].1, outs[1].1, "the same hole outcomes");
+    assert!(outs[0].0 == outs[1].0, "the same output bytes");
+    assert_eq!(boundary_edges(&read_obj(&dir.path().join("out1.obj"))), 0);
+}

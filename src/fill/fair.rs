@@ -42,7 +42,6 @@ use super::{geom, FillError, Hole, Patch};
 use crate::mesh::{Mesh, VertexId};
 use crate::policy::{Fair, Weights};
 use faer::linalg::solvers::Solve;
-use faer::sparse::{SparseColMat, Triplet};
 use faer::Mat;
 use glam::DVec3;
 use std::collections::HashMap;
@@ -253,12 +252,22 @@ impl FairSolver {
             }
         }
         let m = unknowns.len();
-        let mut triplets: Vec<Triplet<usize, usize, f64>> = Vec::new();
+        // rows are assembled one at a time in a scatter array (the recursive
+        // expansion of Δ^c visits each neighbour of a neighbour many times) and
+        // stored compressed, sorted and without duplicates
+        let mut row_ptr: Vec<usize> = Vec::with_capacity(m + 1);
+        let mut col_idx: Vec<usize> = Vec::new();
+        let mut vals: Vec<f64> = Vec::new();
+        let mut scatter = Scatter {
+            val: vec![0.0; m],
+            touched: Vec::new(),
+            seen: vec![false; m],
+        };
         let mut rhs = Mat::<f64>::zeros(m, 3);
+        row_ptr.push(0);
         for (row, &v) in unknowns.iter().enumerate() {
             let mut acc = RowAcc {
-                row,
-                triplets: &mut triplets,
+                scatter: &mut scatter,
                 rhs: [0.0; 3],
                 col: &col,
                 local,
@@ -273,8 +282,20 @@ impl FairSolver {
             for (c, val) in r.iter().enumerate() {
                 rhs[(row, c)] = *val;
             }
+            scatter.touched.sort_unstable();
+            for &j in &scatter.touched {
+                col_idx.push(j);
+                vals.push(scatter.val[j]);
+                scatter.val[j] = 0.0;
+                scatter.seen[j] = false;
+            }
+            scatter.touched.clear();
+            row_ptr.push(col_idx.len());
         }
-        let mat = SparseColMat::<usize, f64>::try_new_from_triplets(m, m, &triplets)
+        let symbolic =
+            faer::sparse::SymbolicSparseRowMat::<usize>::new_checked(m, m, row_ptr, None, col_idx);
+        let mat = faer::sparse::SparseRowMat::<usize, f64>::new(symbolic, vals)
+            .to_col_major()
             .map_err(|e| FillError::Failed(format!("fairing matrix: {e:?}")))?;
         let llt = if op.symmetric {
             mat.sp_cholesky(faer::Side::Lower).ok()
@@ -348,10 +369,16 @@ impl FairSolver {
     }
 }
 
+/// One sparse row being summed: values by column, and the columns touched.
+struct Scatter {
+    val: Vec<f64>,
+    touched: Vec<usize>,
+    seen: Vec<bool>,
+}
+
 /// Accumulates one row of `Δ^c` by recursive expansion.
 struct RowAcc<'a> {
-    row: usize,
-    triplets: &'a mut Vec<Triplet<usize, usize, f64>>,
+    scatter: &'a mut Scatter,
     rhs: [f64; 3],
     col: &'a [usize],
     local: &'a LocalMesh,
@@ -377,8 +404,12 @@ impl RowAcc<'_> {
     fn expand(&mut self, v: usize, mult: f64, depth: u8) -> Result<(), FillError> {
         if depth == 0 {
             if self.local.free[v] {
-                self.triplets
-                    .push(Triplet::new(self.row, self.col[v], mult));
+                let j = self.col[v];
+                if !self.scatter.seen[j] {
+                    self.scatter.seen[j] = true;
+                    self.scatter.touched.push(j);
+                }
+                self.scatter.val[j] += mult;
             } else {
                 let p = self.local.positions[v];
                 self.rhs[0] -= mult * p.x;

@@ -19,7 +19,7 @@ pub mod wavefront;
 use crate::check::Checker;
 use crate::mesh::{Mesh, VertexId};
 use crate::policy::{Method, Policy};
-use crate::report::{Attempt, HoleClass, HoleReport, HoleStatus, Outcome};
+use crate::report::{Attempt, HoleClass, HoleReport, HoleStatus, Outcome, PatchQuality};
 use glam::DVec3;
 use std::time::{Duration, Instant};
 
@@ -161,13 +161,125 @@ pub fn methods_for(policy: &Policy, class: HoleClass) -> &[Method] {
     }
 }
 
-/// Fills one hole with the class's method list, checking every patch and applying
-/// the first accepted one. Returns the hole's log entry.
-pub fn fill_hole(
+/// What the first phase of [`fill_hole`] found for one hole: every attempt so far and,
+/// if one passed the checks against the mesh as it was, that patch.
+#[derive(Clone, Debug)]
+pub struct Proposal {
+    /// Attempts that failed or were rejected, in order.
+    pub tried: Vec<Attempt>,
+    /// The accepted attempt: index in the class's method list, patch, quality, ms.
+    pub accepted: Option<(usize, Patch, PatchQuality, f64)>,
+    /// Time spent, in milliseconds.
+    pub ms: f64,
+}
+
+/// One method on one hole: run it, relax the patch tangentially, check it. `Ok` holds
+/// the checked patch and its quality; `Err` the attempt that failed.
+fn attempt(
+    method: Method,
+    mesh: &Mesh,
+    hole: &Hole,
+    policy: &Policy,
+    checker: &Checker,
+) -> Result<(Patch, PatchQuality, f64), Attempt> {
+    let ta = Instant::now();
+    let ctx = FillContext {
+        mesh,
+        hole,
+        policy,
+        deadline: Deadline::after_ms(policy.limits.hole_time_ms),
+    };
+    let failed = |outcome, reason: String| Attempt {
+        method,
+        outcome,
+        reason,
+        ms: ms_since(ta),
+    };
+    // a method that panics (a bug, or a solver that panics on singular input)
+    // fails over like any other failure: one bad hole never takes the file down
+    let result =
+        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run_method(method, &ctx)))
+            .unwrap_or_else(|_| {
+                Err(FillError::Failed(format!(
+                    "internal error in {}",
+                    method.name()
+                )))
+            })
+            .and_then(|p| {
+                ctx.deadline.check()?;
+                Ok(p)
+            });
+    let patch = match result {
+        Ok(p) => p,
+        Err(FillError::Timeout) => {
+            return Err(failed(
+                Outcome::Timeout,
+                format!("time limit of {} ms reached", policy.limits.hole_time_ms),
+            ))
+        }
+        Err(FillError::Failed(why)) => return Err(failed(Outcome::Error, why)),
+    };
+    // even out the triangles tangentially; keep that only if it passes the checks
+    let mut relaxed = patch.clone();
+    relax::tangential_relax(mesh, hole, &mut relaxed, policy.fair.tangential_relax, 0.5);
+    if relaxed != patch {
+        if let Ok(q) = checker.check_patch(mesh, &hole.vertices, &relaxed, &policy.checks) {
+            return Ok((relaxed, q, ms_since(ta)));
+        }
+    }
+    match checker.check_patch(mesh, &hole.vertices, &patch, &policy.checks) {
+        Ok(q) => Ok((patch, q, ms_since(ta))),
+        Err(why) => Err(failed(Outcome::Rejected, why.to_string())),
+    }
+}
+
+/// First phase of filling a hole, read-only so that holes can run in parallel: tries
+/// the class's methods in order from `from` and stops at the first patch that passes
+/// every check against `mesh`.
+pub fn propose(
+    mesh: &Mesh,
+    hole: &Hole,
+    policy: &Policy,
+    checker: &Checker,
+    from: usize,
+) -> Proposal {
+    let t0 = Instant::now();
+    let mut tried = Vec::new();
+    if hole.len() >= 3 {
+        for (i, &method) in methods_for(policy, hole.class)
+            .iter()
+            .enumerate()
+            .skip(from)
+        {
+            match attempt(method, mesh, hole, policy, checker) {
+                Ok((patch, q, ms)) => {
+                    return Proposal {
+                        tried,
+                        accepted: Some((i, patch, q, ms)),
+                        ms: ms_since(t0),
+                    }
+                }
+                Err(a) => tried.push(a),
+            }
+        }
+    }
+    Proposal {
+        tried,
+        accepted: None,
+        ms: ms_since(t0),
+    }
+}
+
+/// Second phase, serial in hole order: checks the proposed patch against the patches
+/// of the holes filled before it and applies it; if it meets one, goes on down the
+/// method list with full checks. Returns the hole's log entry. The result depends only
+/// on the mesh the proposals were made on and on the hole order, never on threads.
+pub fn finish_hole(
     mesh: &mut Mesh,
     hole: &Hole,
     policy: &Policy,
     checker: &mut Checker,
+    proposal: Proposal,
 ) -> HoleReport {
     let t0 = Instant::now();
     let mut rep = HoleReport {
@@ -177,7 +289,7 @@ pub fn fill_hole(
         mean_edge_length: hole.mean_edge_length,
         class: hole.class,
         method: None,
-        tried: Vec::new(),
+        tried: proposal.tried,
         status: HoleStatus::Failed,
         reason: String::new(),
         added_vertices: 0,
@@ -185,90 +297,74 @@ pub fn fill_hole(
         quality: None,
         ms: 0.0,
     };
+    let done = |rep: &mut HoleReport| rep.ms = proposal.ms + ms_since(t0);
     if hole.len() < 3 {
         rep.reason = format!(
             "a loop of {} boundary vertices cannot be filled",
             hole.len()
         );
-        rep.ms = ms_since(t0);
+        done(&mut rep);
         return rep;
     }
-    for &method in methods_for(policy, hole.class) {
-        let ta = Instant::now();
-        let ctx = FillContext {
-            mesh,
-            hole,
-            policy,
-            deadline: Deadline::after_ms(policy.limits.hole_time_ms),
-        };
-        // a method that panics (a bug, or a solver that panics on singular input)
-        // fails over like any other failure: one bad hole never takes the file down
-        let result =
-            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run_method(method, &ctx)))
-                .unwrap_or_else(|_| {
-                    Err(FillError::Failed(format!(
-                        "internal error in {}",
-                        method.name()
-                    )))
-                })
-                .and_then(|p| {
-                    ctx.deadline.check()?;
-                    Ok(p)
-                });
-        let attempt = |outcome, reason: String| Attempt {
-            method,
-            outcome,
-            reason,
-            ms: ms_since(ta),
-        };
-        let patch = match result {
-            Ok(p) => p,
-            Err(FillError::Timeout) => {
-                rep.tried.push(attempt(
-                    Outcome::Timeout,
-                    format!("time limit of {} ms reached", policy.limits.hole_time_ms),
-                ));
-                continue;
+    let methods = methods_for(policy, hole.class);
+    let mut next = Some(proposal.accepted);
+    let mut from = methods.len();
+    // the proposal first, then each later method with full checks
+    loop {
+        let candidate = match next.take() {
+            Some(Some((i, patch, q, ms))) => {
+                from = i + 1;
+                match checker.check_against_added(mesh, &hole.vertices, &patch, &policy.checks) {
+                    Ok(()) => Some((i, patch, q, ms)),
+                    Err(why) => {
+                        rep.tried.push(Attempt {
+                            method: methods[i],
+                            outcome: Outcome::Rejected,
+                            reason: why.to_string(),
+                            ms,
+                        });
+                        None
+                    }
+                }
             }
-            Err(FillError::Failed(why)) => {
-                rep.tried.push(attempt(Outcome::Error, why));
-                continue;
+            Some(None) => break,
+            None => {
+                if from >= methods.len() {
+                    break;
+                }
+                let p = propose(mesh, hole, policy, checker, from);
+                rep.tried.extend(p.tried);
+                from = methods.len();
+                p.accepted
             }
         };
-        // even out the triangles tangentially; keep that only if it passes the checks
-        let mut relaxed = patch.clone();
-        relax::tangential_relax(mesh, hole, &mut relaxed, policy.fair.tangential_relax, 0.5);
-        let patch = if relaxed != patch
-            && checker
-                .check_patch(mesh, &hole.vertices, &relaxed, &policy.checks)
-                .is_ok()
-        {
-            relaxed
-        } else {
-            patch
+        let Some((i, patch, quality, ms)) = candidate else {
+            continue;
         };
-        let quality = match checker.check_patch(mesh, &hole.vertices, &patch, &policy.checks) {
-            Ok(q) => q,
-            Err(why) => {
-                rep.tried.push(attempt(Outcome::Rejected, why.to_string()));
-                continue;
-            }
-        };
+        let method = methods[i];
         match apply_patch(mesh, hole, &patch) {
             Ok(faces) => {
                 checker.commit(mesh, faces);
-                rep.tried.push(attempt(Outcome::Accepted, String::new()));
+                rep.tried.push(Attempt {
+                    method,
+                    outcome: Outcome::Accepted,
+                    reason: String::new(),
+                    ms,
+                });
                 rep.method = Some(method);
                 rep.status = HoleStatus::Filled;
                 rep.added_vertices = patch.new_vertices.len();
                 rep.added_faces = patch.triangles.len();
                 rep.quality = Some(quality);
-                rep.ms = ms_since(t0);
+                done(&mut rep);
                 return rep;
             }
-            Err(why) => {
-                rep.tried.push(attempt(Outcome::Rejected, why));
-            }
+            Err(why) => rep.tried.push(Attempt {
+                method,
+                outcome: Outcome::Rejected,
+                reason: why,
+                ms,
+            }),
         }
     }
     rep.reason = if rep.tried.is_empty() {
@@ -281,8 +377,20 @@ pub fn fill_hole(
             .collect();
         format!("every method failed ({})", list.join("; "))
     };
-    rep.ms = ms_since(t0);
+    done(&mut rep);
     rep
+}
+
+/// Fills one hole with the class's method list, checking every patch and applying
+/// the first accepted one. Returns the hole's log entry.
+pub fn fill_hole(
+    mesh: &mut Mesh,
+    hole: &Hole,
+    policy: &Policy,
+    checker: &mut Checker,
+) -> HoleReport {
+    let proposal = propose(mesh, hole, policy, checker, 0);
+    finish_hole(mesh, hole, policy, checker, proposal)
 }
 
 /// Adds a checked patch to the mesh. Returns the range of new face indices.
