@@ -90,8 +90,11 @@
 // `!(x > bound)` is used on purpose: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod residual;
+pub mod retry;
+
 use super::{FillContext, FillError, Patch};
-use crate::policy::{Wavefront, WavefrontPlacement};
+use crate::policy::{Policy, Wavefront, WavefrontPlacement};
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -127,9 +130,61 @@ const SMALL_FRONT: usize = 10;
 /// A triangle spanning more cells than this is kept in a list tested every time.
 const MAX_CELLS: i64 = 512;
 
-/// Fills the hole with the improved wavefront (policy section `[wavefront]`).
+/// Fills the hole with the improved wavefront (policy section `[wavefront]`): the
+/// policy's settings first; when their patch fails the checks, the variants of
+/// [`variants`] (see [`retry`]).
 pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
-    fill_with_stats(ctx).map(|(p, _)| p)
+    retry::first_passing(ctx, &variants(ctx.policy), |c| {
+        fill_with_stats(c).map(|(p, _)| p)
+    })
+}
+
+/// The policy, then the same method with the settings measured most robust on folded
+/// scanned holes (`placement = "interpolated"` without the restoration rotation, which
+/// can turn a triangle into its neighbour on a tight fold), then both with the next seed
+/// (other random draws), then `alpha = 90` (the paper's setting for some models).
+pub fn variants(policy: &Policy) -> Vec<(&'static str, Policy)> {
+    let mut out: Vec<(&'static str, Policy)> = vec![("policy", policy.clone())];
+    let mut plain = policy.clone();
+    plain.wavefront.placement = WavefrontPlacement::Interpolated;
+    plain.wavefront.curvature_restoration = false;
+    let mut push = |name: &'static str, p: Policy| {
+        if !out.iter().any(|(_, q)| *q == p) {
+            out.push((name, p));
+        }
+    };
+    push("interpolated, no restoration", plain.clone());
+    let mut s1 = policy.clone();
+    s1.seed = s1.seed.wrapping_add(1) & (i64::MAX as u64);
+    push("next seed", s1);
+    let mut s2 = plain.clone();
+    s2.seed = s2.seed.wrapping_add(1) & (i64::MAX as u64);
+    push("interpolated, no restoration, next seed", s2);
+    // a few rings of wavefront, the rest closed as a residual front (min-area,
+    // refined, faired against the rings): for large holes whose fronts climb or fold
+    for steps in [4, 2] {
+        if policy.wavefront.max_steps_per_vertex > steps {
+            let mut r = policy.clone();
+            r.wavefront.max_steps_per_vertex = steps;
+            push(
+                if steps == 4 {
+                    "4 steps per vertex, residual closed"
+                } else {
+                    "2 steps per vertex, residual closed"
+                },
+                r,
+            );
+        }
+    }
+    if policy.wavefront.alpha < 90.0 && policy.wavefront.beta > 90.0 {
+        let mut a = policy.clone();
+        a.wavefront.alpha = 90.0;
+        push("alpha 90", a);
+        let mut b = plain;
+        b.wavefront.alpha = 90.0;
+        push("interpolated, no restoration, alpha 90", b);
+    }
+    out
 }
 
 /// What a run did (for tests and diagnostics).
@@ -149,6 +204,8 @@ pub struct Stats {
     pub relaxed_steps: usize,
     /// Small stuck fronts closed by unchecked ear clipping.
     pub clipped_fronts: usize,
+    /// Stuck fronts closed by [`residual::close`].
+    pub residual_fronts: usize,
 }
 
 /// [`fill`], also returning what the run did.
@@ -733,10 +790,14 @@ impl Wave {
             steps += 1;
             self.stats.steps = steps;
             if steps > cap {
-                return Err(FillError::Failed(format!(
-                    "the front did not close within {cap} steps (max_steps_per_vertex = {})",
-                    opts.max_steps_per_vertex
-                )));
+                // out of steps: close what is left as residual fronts
+                return self.close_residual_fronts(ctx).map_err(|e| {
+                    FillError::Failed(format!(
+                        "the front did not close within {cap} steps (max_steps_per_vertex = {}) \
+                         and its residual could not be closed: {e}",
+                        opts.max_steps_per_vertex
+                    ))
+                });
             }
             let node = match self.peek() {
                 Some(e) if e.theta < mu && self.nodes[e.node as usize].fails == 0 => e.node,
@@ -766,13 +827,107 @@ impl Wave {
                     self.stats.relaxed_steps += 1;
                     stalls = 0;
                 } else if stalls > 2 * self.alive.len() + 16 {
-                    return Err(FillError::Failed(format!(
-                        "the front is stuck: none of its {} vertices can advance without an overlap, \
-                         a duplicate edge or a degenerate triangle",
-                        self.alive.len()
-                    )));
+                    // stuck: close every remaining front as a residual loop
+                    let left = self.alive.len();
+                    return self.close_residual_fronts(ctx).map_err(|e| {
+                        FillError::Failed(format!(
+                            "the front is stuck (none of its {left} vertices can advance without \
+                             an overlap, a duplicate edge or a degenerate triangle) and its \
+                             residual could not be closed: {e}"
+                        ))
+                    });
                 }
             }
+        }
+        Ok(())
+    }
+
+    /// Closes every remaining front with [`residual::close`] (see that module).
+    fn close_residual_fronts(&mut self, ctx: &FillContext) -> Result<(), FillError> {
+        while let Some(&start) = self.alive.first() {
+            ctx.deadline.check()?;
+            let f = self.nodes[start as usize].front as usize;
+            let mut ring = vec![start];
+            let mut a = self.nodes[start as usize].next;
+            while a != start {
+                if ring.len() > self.nodes.len() {
+                    return Err(FillError::Failed("internal error: open front".into()));
+                }
+                ring.push(a);
+                a = self.nodes[a as usize].next;
+            }
+            let verts: Vec<u32> = ring.iter().map(|&n| self.nodes[n as usize].vert).collect();
+            if verts.iter().collect::<HashSet<_>>().len() != verts.len() {
+                return Err(FillError::Failed(
+                    "the residual front passes a vertex twice".into(),
+                ));
+            }
+            let n = verts.len();
+            if n < 3 {
+                return Err(FillError::Failed(format!(
+                    "a residual front of {n} vertices"
+                )));
+            }
+            let pts: Vec<DVec3> = verts.iter().map(|&v| self.pos[v as usize]).collect();
+            let mut forbidden = HashSet::new();
+            for i in 0..n {
+                for j in i + 2..n {
+                    if (i, j) != (0, n - 1) && self.edge_exists(verts[i], verts[j]) {
+                        forbidden.insert((i as u32, j as u32));
+                    }
+                }
+            }
+            let on_ring: HashSet<u32> = verts.iter().copied().collect();
+            let mut outside = vec![None; n];
+            let mut context = Vec::new();
+            for t in &self.placed {
+                if !t
+                    .ids
+                    .iter()
+                    .any(|c| c.is_some_and(|c| on_ring.contains(&c)))
+                {
+                    continue;
+                }
+                context.push(t.p);
+                for c in 0..3 {
+                    if let (Some(a), Some(b)) = (t.ids[c], t.ids[(c + 1) % 3]) {
+                        // the triangle outside ring edge i -> i+1 holds the half-edge i+1 -> i
+                        if let Some(i) = verts.iter().position(|&x| x == b) {
+                            if verts[(i + 1) % n] == a && t.n != DVec3::ZERO {
+                                outside[i] = Some(t.n);
+                            }
+                        }
+                    }
+                }
+            }
+            let input = residual::Residual {
+                ring: &pts,
+                forbidden: &forbidden,
+                outside_normals: &outside,
+                context: &context,
+                edge_length: self.len,
+            };
+            let (new_pts, tris) = residual::close(&input, ctx.policy, &ctx.deadline)?;
+            let base = self.pos.len() as u32;
+            for p in new_pts {
+                self.pos.push(p);
+                self.acc.push(DVec3::ZERO);
+            }
+            let map = |i: u32| {
+                if (i as usize) < n {
+                    verts[i as usize]
+                } else {
+                    base + i - n as u32
+                }
+            };
+            for t in tris {
+                self.add_triangle(t.map(map));
+            }
+            for node in ring {
+                self.kill(node);
+            }
+            self.front_size[f] = 0;
+            self.stats.residual_fronts += 1;
         }
         Ok(())
     }
