@@ -103,7 +103,73 @@ const FRONT_MIN_ANGLE_DEG: f64 = 2.0;
 const UNIFORM_WEIGHT: f64 = 1.154_700_538_379_251_5;
 
 /// Fills the hole: plain front, LS-SVM prediction of the Laplacian, Poisson solve.
+/// Self-checked variants (see [`super::wavefront::retry`]): first the front as the
+/// module doc says (3-D, else planar); when its patch fails the checks, the 3-D front
+/// that closes a stuck loop as a residual front; then both with `iterations = 1` and
+/// the prediction halved (`gamma` / 4, a smoother regression).
 pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
+    let p = ctx.policy.clone();
+    let mut soft = p.clone();
+    soft.lssvm.iterations = 1;
+    soft.lssvm.gamma = (soft.lssvm.gamma / 4.0).max(1e-6);
+    let variants = [
+        ("policy", p.clone()),
+        ("residual front", p),
+        ("one iteration, gamma / 4", soft.clone()),
+        ("residual front, one iteration, gamma / 4", soft),
+        ("minimum-area initial patch", ctx.policy.clone()),
+    ];
+    super::wavefront::retry::first_passing_at(ctx, &variants, |at, c| {
+        let start = match at {
+            4 => Start::MinArea,
+            1 | 3 => Start::ResidualFront,
+            _ => Start::Front,
+        };
+        fill_with(c, start)
+    })
+}
+
+/// The initial patch of [`fill_with`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Start {
+    /// The plain front of paper 003 §3.2 (3-D, else in the loop's plane).
+    Front,
+    /// The 3-D front; a stuck loop is closed as a residual front.
+    ResidualFront,
+    /// Not the paper's: the whole loop closed as one residual front (minimum-area
+    /// triangulation, refined, faired), for loops where the front makes an overlap.
+    MinArea,
+}
+
+/// The initial patch closing the whole loop as a residual front.
+fn min_area_start(ctx: &FillContext) -> Result<Patch, FillError> {
+    let pts = ctx.boundary_positions();
+    let forbidden = super::min_area_fair::forbidden_chords(ctx.mesh, &ctx.hole.vertices);
+    let outside = super::min_area_fair::outside_normals(ctx.mesh, &ctx.hole.vertices);
+    let mut faces = HashSet::new();
+    for &v in &ctx.hole.vertices {
+        faces.extend(ctx.mesh.topo.vertex_faces(v));
+    }
+    let mut faces: Vec<_> = faces.into_iter().collect();
+    faces.sort_unstable();
+    let context: Vec<[DVec3; 3]> = faces.into_iter().map(|f| ctx.mesh.tri(f)).collect();
+    let input = super::wavefront::residual::Residual {
+        ring: &pts,
+        forbidden: &forbidden,
+        outside_normals: &outside,
+        context: &context,
+        edge_length: ctx.hole.mean_edge_length,
+    };
+    let (new_vertices, triangles) =
+        super::wavefront::residual::close(&input, ctx.policy, &ctx.deadline)?;
+    Ok(Patch {
+        new_vertices,
+        triangles,
+    })
+}
+
+/// [`fill`] with the given initial patch.
+pub fn fill_with(ctx: &FillContext, start: Start) -> Result<Patch, FillError> {
     let opts = &ctx.policy.lssvm;
     opts.validate()
         .map_err(|e| FillError::Failed(format!("policy {e}")))?;
@@ -117,13 +183,17 @@ pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
     if !(l.is_finite() && l > 0.0) {
         return Err(FillError::Failed("the loop has no length".into()));
     }
-    let mut patch = initial_front(
-        ctx.mesh,
-        &ctx.hole.vertices,
-        l,
-        opts.merge_distance,
-        &ctx.deadline,
-    )?;
+    let mut patch = match start {
+        Start::MinArea => min_area_start(ctx)?,
+        _ => initial_front_with(
+            ctx.mesh,
+            &ctx.hole.vertices,
+            l,
+            opts.merge_distance,
+            &ctx.deadline,
+            start == Start::ResidualFront,
+        )?,
+    };
     if patch.new_vertices.is_empty() {
         return Ok(patch);
     }
@@ -315,6 +385,19 @@ pub fn initial_front(
     merge_distance: f64,
     deadline: &super::Deadline,
 ) -> Result<Patch, FillError> {
+    initial_front_with(mesh, hole, edge, merge_distance, deadline, false)
+}
+
+/// [`initial_front`]; with `residual`, a stuck 3-D front closes its loop as a residual
+/// front ([`super::wavefront::residual`]) instead of the planar fallback.
+pub fn initial_front_with(
+    mesh: &Mesh,
+    hole: &[VertexId],
+    edge: f64,
+    merge_distance: f64,
+    deadline: &super::Deadline,
+    residual: bool,
+) -> Result<Patch, FillError> {
     let k = hole.len();
     if k < 3 {
         return Err(FillError::Failed(format!(
@@ -325,6 +408,13 @@ pub fn initial_front(
         return Err(FillError::Failed(
             "front edge length is not positive".into(),
         ));
+    }
+    if residual {
+        let mut f = Front::new(mesh, hole, edge, merge_distance, false);
+        if let Some(f) = f.as_mut() {
+            f.residual = Some(*deadline);
+        }
+        return run_front(f, k, deadline);
     }
     match run_front(
         Front::new(mesh, hole, edge, merge_distance, false),
@@ -482,6 +572,8 @@ struct Front {
     guide: Guide,
     /// Front edges and obstacles farther than this from a step's vertex are not tested.
     radius: f64,
+    /// Close a stuck loop as a residual front (with this deadline) instead of failing.
+    residual: Option<super::Deadline>,
 }
 
 struct Obstacle {
@@ -596,6 +688,7 @@ impl Front {
             radius: if planar { f64::INFINITY } else { 4.0 * edge },
             edge,
             merge: merge_distance * edge,
+            residual: None,
         })
     }
 
@@ -688,13 +781,78 @@ impl Front {
             .sum::<DVec3>()
             .normalize_or_zero();
         let newell = geom::newell_normal(&pts);
-        self.clip_ear(lp, newell)
+        if let Some(out) = self
+            .clip_ear(lp, newell)
             .or_else(|| self.clip_ear(lp, mean_guide))
-            .ok_or_else(|| {
-                FillError::Failed(format!(
-                    "advancing front is stuck on a loop of {m} vertices"
-                ))
+        {
+            return Ok(out);
+        }
+        // no ear either: close the loop as a residual front (min-area, refined, faired)
+        let Some(deadline) = self.residual else {
+            return Err(FillError::Failed(format!(
+                "advancing front is stuck on a loop of {m} vertices"
+            )));
+        };
+        self.close_residual(lp, &deadline).map_err(|e| {
+            FillError::Failed(format!(
+                "advancing front is stuck on a loop of {m} vertices and the residual \
+                 closing failed: {e}"
+            ))
+        })?;
+        Ok(Vec::new())
+    }
+
+    /// Closes loop `lp` with [`super::wavefront::residual::close`].
+    fn close_residual(&mut self, lp: &[u32], deadline: &super::Deadline) -> Result<(), FillError> {
+        let m = lp.len();
+        if lp.iter().collect::<HashSet<_>>().len() != m {
+            return Err(FillError::Failed("the loop passes a vertex twice".into()));
+        }
+        let pts: Vec<DVec3> = lp.iter().map(|&v| self.pos[v as usize]).collect();
+        let mut forbidden = HashSet::new();
+        for i in 0..m {
+            for j in i + 2..m {
+                if (i, j) != (0, m - 1) && self.edges.contains(&ukey(lp[i], lp[j])) {
+                    forbidden.insert((i as u32, j as u32));
+                }
+            }
+        }
+        let on: HashSet<u32> = lp.iter().copied().collect();
+        let context: Vec<[DVec3; 3]> = self
+            .obstacles
+            .iter()
+            .filter(|o| o.ids.iter().any(|i| on.contains(i)))
+            .map(|o| o.pts)
+            .collect();
+        let outside = vec![None; m];
+        let policy = crate::policy::Policy::default();
+        let input = super::wavefront::residual::Residual {
+            ring: &pts,
+            forbidden: &forbidden,
+            outside_normals: &outside,
+            context: &context,
+            edge_length: self.edge,
+        };
+        let (new_pts, tris) = super::wavefront::residual::close(&input, &policy, deadline)?;
+        let base = self.pos.len() as u32;
+        for p in new_pts {
+            self.pos.push(p);
+            self.nacc.push(DVec3::ZERO);
+        }
+        let mapped: Vec<[u32; 3]> = tris
+            .iter()
+            .map(|t| {
+                t.map(|i| {
+                    if (i as usize) < m {
+                        lp[i as usize]
+                    } else {
+                        base + i - m as u32
+                    }
+                })
             })
+            .collect();
+        self.add_triangles(&mapped);
+        Ok(())
     }
 
     /// Fallback when no front rule applies: project the loop onto the plane normal to

@@ -24,9 +24,19 @@ pub fn first_passing(
     variants: &[(&str, Policy)],
     run: impl Fn(&FillContext) -> Result<Patch, FillError>,
 ) -> Result<Patch, FillError> {
+    first_passing_at(ctx, variants, |_, c| run(c))
+}
+
+/// [`first_passing`] for variants that are not only policies: `run` also gets the
+/// variant's index.
+pub fn first_passing_at(
+    ctx: &FillContext,
+    variants: &[(&str, Policy)],
+    run: impl Fn(usize, &FillContext) -> Result<Patch, FillError>,
+) -> Result<Patch, FillError> {
     let mut checker: Option<Checker> = None;
     let mut reasons: Vec<String> = Vec::new();
-    for (name, pol) in variants {
+    for (at, (name, pol)) in variants.iter().enumerate() {
         ctx.deadline.check()?;
         let sub = FillContext {
             mesh: ctx.mesh,
@@ -34,7 +44,7 @@ pub fn first_passing(
             policy: pol,
             deadline: ctx.deadline,
         };
-        match run(&sub) {
+        match run(at, &sub) {
             Ok(p) => {
                 if variants.len() == 1 {
                     return Ok(p);
