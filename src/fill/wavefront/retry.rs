@@ -13,8 +13,9 @@
 //! this wrapper; the list is fixed, so the output stays deterministic.
 
 use super::super::{FillContext, FillError, Patch};
-use crate::check::Checker;
+use crate::check::{CheckFailure, Checker};
 use crate::policy::Policy;
+use std::collections::{HashMap, HashSet};
 
 /// Runs `run` under each policy of `variants` (first = the policy as given) and returns
 /// the first patch that passes the checks, else a failure listing why each variant
@@ -52,7 +53,15 @@ pub fn first_passing_at(
                 let c = checker.get_or_insert_with(|| Checker::new(ctx.mesh));
                 match c.check_patch(ctx.mesh, &ctx.hole.vertices, &p, &ctx.policy.checks) {
                     Ok(_) => return Ok(p),
-                    Err(e) => reasons.push(format!("{name}: {e}")),
+                    Err(e) => {
+                        if let Some(q) = repair_by_flips(ctx, c, p.clone(), e.clone()) {
+                            return Ok(q);
+                        }
+                        if let Some(q) = repair_by_retriangulation(ctx, c, p, e.clone()) {
+                            return Ok(q);
+                        }
+                        reasons.push(format!("{name}: {e}"))
+                    }
                 }
             }
             Err(FillError::Timeout) => return Err(FillError::Timeout),
@@ -66,4 +75,269 @@ pub fn first_passing_at(
         "every variant failed ({})",
         reasons.join("; ")
     )))
+}
+
+/// Rounds of [`repair_by_flips`].
+const REPAIR_ROUNDS: usize = 24;
+
+/// Patch triangles named by a failure: the failing one and, for a patch-patch
+/// intersection, the other.
+fn culprits(e: &CheckFailure) -> Vec<usize> {
+    match e {
+        CheckFailure::SelfIntersection(i, other) => {
+            let mut v = vec![*i];
+            if let Some(j) = other
+                .strip_prefix("patch triangle ")
+                .and_then(|r| r.trim().parse::<usize>().ok())
+            {
+                v.push(j);
+            }
+            v
+        }
+        CheckFailure::Degenerate(i, _) => vec![*i],
+        CheckFailure::Topology(_) => Vec::new(),
+    }
+}
+
+/// Local repair of a patch that fails the checks at a few triangles (a triangle
+/// spanning a fold of the loop, a sliver): flips an interior edge of a named triangle,
+/// keeping a flip when the patch then passes or fails at other triangles, for at most
+/// [`REPAIR_ROUNDS`] rounds. Only connectivity changes; no vertex moves. `None` when
+/// the patch still fails.
+fn repair_by_flips(
+    ctx: &FillContext,
+    checker: &Checker,
+    mut patch: Patch,
+    mut err: CheckFailure,
+) -> Option<Patch> {
+    let mut tried: HashSet<(u32, u32)> = HashSet::new();
+    for _ in 0..REPAIR_ROUNDS {
+        if ctx.deadline.check().is_err() {
+            return None;
+        }
+        let bad = culprits(&err);
+        if bad.is_empty() {
+            return None;
+        }
+        let mut owner: HashMap<(u32, u32), usize> = HashMap::new();
+        for (t, tri) in patch.triangles.iter().enumerate() {
+            for c in 0..3 {
+                owner.insert((tri[c], tri[(c + 1) % 3]), t);
+            }
+        }
+        let mut progressed = false;
+        'search: for &t in &bad {
+            let Some(&tri) = patch.triangles.get(t) else {
+                continue;
+            };
+            for c in 0..3 {
+                let (a, b, cc) = (tri[c], tri[(c + 1) % 3], tri[(c + 2) % 3]);
+                let Some(&u) = owner.get(&(b, a)) else {
+                    continue;
+                };
+                let other = patch.triangles[u];
+                let Some(&d) = other.iter().find(|&&x| x != a && x != b) else {
+                    continue;
+                };
+                if cc == d || owner.contains_key(&(cc, d)) || owner.contains_key(&(d, cc)) {
+                    continue;
+                }
+                if !tried.insert((a.min(b), a.max(b))) {
+                    continue;
+                }
+                let mut q = patch.clone();
+                q.triangles[t] = [a, d, cc];
+                q.triangles[u] = [b, cc, d];
+                match checker.check_patch(ctx.mesh, &ctx.hole.vertices, &q, &ctx.policy.checks) {
+                    Ok(_) => return Some(q),
+                    Err(e2) => {
+                        let named = culprits(&e2);
+                        // progress: the flipped pair is no longer what fails
+                        if !named.is_empty() && !named.iter().any(|x| *x == t || *x == u) {
+                            patch = q;
+                            err = e2;
+                            progressed = true;
+                            break 'search;
+                        }
+                    }
+                }
+            }
+        }
+        if !progressed {
+            return None;
+        }
+    }
+    None
+}
+
+/// Rounds of [`repair_by_retriangulation`] (each one grows the region by a ring).
+const RETRIANGULATE_ROUNDS: usize = 6;
+
+/// Local repair of a patch whose failure flips cannot mend (a triangle that jumps
+/// across a fold of the loop): the triangles around the named ones (those sharing a
+/// vertex with them) are removed, their interior new vertices dropped, and the small
+/// loop left is closed by the minimum-area triangulation in 3-D (no projection, so a
+/// folded boundary is closed along its fold). The region grows by one ring per round
+/// while the patch fails there. `None` when no round passes the checks.
+fn repair_by_retriangulation(
+    ctx: &FillContext,
+    checker: &Checker,
+    patch: Patch,
+    err: CheckFailure,
+) -> Option<Patch> {
+    use super::super::min_area_fair::{forbidden_chords, triangulate};
+    let k = ctx.hole.len();
+    let seeds = culprits(&err);
+    if seeds.is_empty() {
+        return None;
+    }
+    let mesh_chords = forbidden_chords(ctx.mesh, &ctx.hole.vertices);
+    let boundary = ctx.boundary_positions();
+    let pos_of = |p: &Patch, i: u32| {
+        let i = i as usize;
+        if i < k {
+            boundary[i]
+        } else {
+            p.new_vertices[i - k]
+        }
+    };
+    let mut region: HashSet<usize> = seeds.iter().copied().collect();
+    for _ in 0..RETRIANGULATE_ROUNDS {
+        if ctx.deadline.check().is_err() {
+            return None;
+        }
+        // grow by the triangles sharing a vertex with the region
+        let verts: HashSet<u32> = region
+            .iter()
+            .filter_map(|&t| patch.triangles.get(t))
+            .flat_map(|t| t.iter().copied())
+            .collect();
+        for (t, tri) in patch.triangles.iter().enumerate() {
+            if tri.iter().any(|v| verts.contains(v)) {
+                region.insert(t);
+            }
+        }
+        if region.len() == patch.triangles.len() && k > 3 {
+            // the whole patch: that is no longer a local repair
+            return None;
+        }
+        // the region's boundary, as directed edges of its triangles
+        let inside: HashSet<(u32, u32)> = region
+            .iter()
+            .flat_map(|&t| {
+                let tri = patch.triangles[t];
+                (0..3).map(move |c| (tri[c], tri[(c + 1) % 3]))
+            })
+            .collect();
+        let mut next: HashMap<u32, u32> = HashMap::new();
+        let mut simple = true;
+        for &(a, b) in &inside {
+            if !inside.contains(&(b, a)) && next.insert(a, b).is_some() {
+                simple = false;
+            }
+        }
+        if !simple || next.len() < 3 {
+            continue;
+        }
+        let start = *next.keys().min()?;
+        let mut ring = vec![start];
+        let mut v = next[&start];
+        while v != start {
+            if ring.len() > next.len() {
+                break;
+            }
+            ring.push(v);
+            v = *next.get(&v)?;
+        }
+        if ring.len() != next.len() {
+            continue;
+        }
+        // existing edges outside the region, and mesh chords between loop vertices
+        let mut outside_edges: HashSet<(u32, u32)> = HashSet::new();
+        for (t, tri) in patch.triangles.iter().enumerate() {
+            if !region.contains(&t) {
+                for c in 0..3 {
+                    let (a, b) = (tri[c], tri[(c + 1) % 3]);
+                    outside_edges.insert((a.min(b), a.max(b)));
+                }
+            }
+        }
+        let n = ring.len();
+        let mut forbidden = HashSet::new();
+        for i in 0..n {
+            for j in i + 2..n {
+                if (i, j) == (0, n - 1) {
+                    continue;
+                }
+                let (a, b) = (ring[i].min(ring[j]), ring[i].max(ring[j]));
+                if outside_edges.contains(&(a, b))
+                    || ((b as usize) < k && mesh_chords.contains(&(a, b)))
+                {
+                    forbidden.insert((i as u32, j as u32));
+                }
+            }
+        }
+        let pts: Vec<glam::DVec3> = ring.iter().map(|&v| pos_of(&patch, v)).collect();
+        let outside_normals = vec![None; n];
+        let input = triangulate::LoopInput {
+            pts: &pts,
+            forbidden: &forbidden,
+            outside_normals: &outside_normals,
+            weight: ctx.policy.refine.weight,
+            min_angle: ctx.policy.checks.min_angle_deg.max(0.0).to_radians(),
+            restricted_above: ctx.policy.refine.restricted_search_above,
+            deadline: ctx.deadline,
+        };
+        let Ok(fill) = triangulate::triangulate(&input) else {
+            continue;
+        };
+        // the new patch: triangles outside the region plus the fill; drop unused vertices
+        let mut tris: Vec<[u32; 3]> = patch
+            .triangles
+            .iter()
+            .enumerate()
+            .filter(|(t, _)| !region.contains(t))
+            .map(|(_, t)| *t)
+            .collect();
+        tris.extend(fill.iter().map(|t| t.map(|i| ring[i as usize])));
+        let mut used = vec![false; patch.new_vertices.len()];
+        for t in &tris {
+            for &v in t {
+                if v as usize >= k {
+                    used[v as usize - k] = true;
+                }
+            }
+        }
+        let mut remap = vec![u32::MAX; patch.new_vertices.len()];
+        let mut new_vertices = Vec::new();
+        for (j, &u) in used.iter().enumerate() {
+            if u {
+                remap[j] = (k + new_vertices.len()) as u32;
+                new_vertices.push(patch.new_vertices[j]);
+            }
+        }
+        let triangles = tris
+            .iter()
+            .map(|t| {
+                t.map(|v| {
+                    if (v as usize) < k {
+                        v
+                    } else {
+                        remap[v as usize - k]
+                    }
+                })
+            })
+            .collect();
+        let q = Patch {
+            new_vertices,
+            triangles,
+        };
+        if checker
+            .check_patch(ctx.mesh, &ctx.hole.vertices, &q, &ctx.policy.checks)
+            .is_ok()
+        {
+            return Some(q);
+        }
+    }
+    None
 }
