@@ -79,9 +79,17 @@
 //!     if none is valid the vertex is put back with a penalty. When every vertex fails, one
 //!     step may use thin triangles (angle bound 0), and a front of at most 10 vertices is
 //!     closed by ear clipping without the overlap tests; slivers are flipped away at the
-//!     end where the patch triangle across their longest edge allows. Failing again, or more
-//!     than `max_steps_per_vertex · k` steps, ends with [`FillError::Failed`], so the
-//!     dispatcher falls back. Closes 1999 of 2000 random star-shaped loops.
+//!     end where the patch triangle across their longest edge allows. Failing again, or after
+//!     `max_steps_per_vertex · k` steps, every remaining front is closed as a residual loop
+//!     ([`residual`]: minimum-area triangulation in 3-D, refined to `Avglen`, thin-plate
+//!     faired against the triangles around it). Closes 1999 of 2000 random star-shaped
+//!     loops.
+//!   - the whole run is self-checked ([`retry`]): when its patch fails the dispatcher's
+//!     checks, a local repair (edge flips, then re-triangulation of the region around the
+//!     failing triangle) is tried, then the same method with the settings of [`variants`]
+//!     (the robust `interpolated` placement without restoration, the next seed, a short
+//!     front whose residual is closed as above, `alpha = 90`). On the shared bench
+//!     (35 holes) this closes every hole; before, 3 fronts got stuck or overlapped.
 //!
 //! Cost: a binary heap of front angles with lazy invalidation (only the vertices a step
 //! touches are re-measured) and spatial hashes of the front vertices and the triangles, so
@@ -2140,11 +2148,11 @@ mod tests {
         let policy = Policy::default();
         let (_, r) = run(&mesh, l[..2].to_vec(), &policy);
         assert!(matches!(r, Err(FillError::Failed(_))));
-        // a step cap too small to close fails cleanly
+        // a step cap too small to close leaves a residual front, which is closed
         let mut policy = Policy::default();
         policy.wavefront.max_steps_per_vertex = 1;
-        let (_, r) = run(&mesh, l, &policy);
-        assert!(matches!(r, Err(FillError::Failed(_))), "{r:?}");
+        let (hole, r) = run(&mesh, l, &policy);
+        accept(&mesh, &hole, &r.unwrap(), &policy);
     }
 
     /// Through the dispatcher: a policy that names only `wavefront` fills the sphere
@@ -2242,6 +2250,49 @@ mod tests {
                 tried > 500 && ok * 100 >= tried * 99,
                 "zamp {zamp}: {ok} of {tried}"
             );
+        }
+    }
+
+    /// Regression (homer hole 3, cheburashka hole 1 of the shared bench: fronts stuck on
+    /// a folded loop or out of steps used to fail the method): a front stopped after one
+    /// step per boundary vertex is closed as a residual front, and the patch passes every
+    /// check of the dispatcher, stays within 0.05 of the unit sphere on average (0.12 at
+    /// most) and is the same bit for bit on a second run.
+    #[test]
+    fn a_stopped_front_is_closed_as_a_residual() {
+        let (mesh, _) = Mesh::from_raw(&sphere(4, 0.6));
+        let mut policy = Policy::default();
+        policy.wavefront.max_steps_per_vertex = 1;
+        let l = loop_near(&mesh, SPHERE_DIR.normalize());
+        let hole = Hole::new(0, &mesh, l, &policy);
+        let ctx = FillContext {
+            mesh: &mesh,
+            hole: &hole,
+            policy: &policy,
+            deadline: Deadline::none(),
+        };
+        let (patch, stats) = fill_with_stats(&ctx).unwrap();
+        assert!(stats.residual_fronts >= 1, "{stats:?}");
+        accept(&mesh, &hole, &patch, &policy);
+        crate::check::Checker::new(&mesh)
+            .check_patch(&mesh, &hole.vertices, &patch, &policy.checks)
+            .unwrap();
+        let (mean, max) = stats_of(&patch, |p| sphere_err(p).abs());
+        assert!(mean < 0.05 && max < 0.12, "{mean} {max}");
+        let (again, _) = fill_with_stats(&ctx).unwrap();
+        assert_eq!(again, patch);
+    }
+
+    /// The variants start with the policy itself and never repeat one.
+    #[test]
+    fn variants_start_with_the_policy() {
+        let p = Policy::default();
+        let v = variants(&p);
+        assert_eq!(v[0].1, p);
+        for i in 0..v.len() {
+            for j in i + 1..v.len() {
+                assert_ne!(v[i].1, v[j].1, "{} {}", v[i].0, v[j].0);
+            }
         }
     }
 }

@@ -86,6 +86,13 @@
 //!    flips a triangle, or breaks the link condition. (The collapse rate has no value
 //!    in the paper; 0.6 measured best of 0.5–0.8 on the tests' surfaces.)
 //!
+//! 8. *Self-checked variants* (not in the paper; [`super::wavefront::retry`]): when the
+//!    patch fails the dispatcher's checks (a CDT triangle jumping across a fold of the
+//!    loop, a collapse pulling a vertex over one), a local repair is tried (edge flips,
+//!    then minimum-area re-triangulation in 3-D of the region around the failing
+//!    triangle), then the variants of [`variants`]. On the shared bench this closes
+//!    every hole (before: homer hole 3 and cheburashka hole 5 self-intersected).
+//!
 //! The noise experiment (§5) uses uniform noise in `[−σ, σ]`; our test uses seeded
 //! Gaussian noise (the wording), without the pre-smoothing.
 

@@ -341,3 +341,89 @@ fn repair_by_retriangulation(
     }
     None
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fill::{Deadline, Hole};
+    use crate::mesh::Mesh;
+    use glam::DVec3;
+
+    /// A hole in a flat grid, filled by `min_area_fair`, then one new vertex is moved
+    /// outside the hole (onto the mesh, so its triangles overlap mesh faces): the flips
+    /// cannot mend that, the re-triangulation of the region around it does, and the
+    /// repaired patch passes every check.
+    #[test]
+    fn a_patch_overlapping_the_mesh_is_repaired_locally() {
+        let n = 16;
+        let mut raw = crate::io::RawMesh::default();
+        for j in 0..=n {
+            for i in 0..=n {
+                let x = -1.0 + 2.0 * i as f64 / n as f64;
+                let y = -1.0 + 2.0 * j as f64 / n as f64;
+                raw.positions.push(DVec3::new(x, y, 0.0));
+            }
+        }
+        let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
+        for j in 0..n {
+            for i in 0..n {
+                for f in [
+                    [id(i, j), id(i + 1, j), id(i + 1, j + 1)],
+                    [id(i, j), id(i + 1, j + 1), id(i, j + 1)],
+                ] {
+                    let c = f.iter().map(|&v| raw.positions[v as usize]).sum::<DVec3>() / 3.0;
+                    if c.length() > 0.55 {
+                        raw.faces.push(f);
+                    }
+                }
+            }
+        }
+        let (mesh, _) = Mesh::from_raw(&raw);
+        let policy = Policy::default();
+        let lp = mesh
+            .topo
+            .boundary_loops()
+            .into_iter()
+            .min_by(|a, b| a.len().cmp(&b.len()))
+            .unwrap();
+        let hole = Hole::new(0, &mesh, lp, &policy);
+        let ctx = FillContext {
+            mesh: &mesh,
+            hole: &hole,
+            policy: &policy,
+            deadline: Deadline::none(),
+        };
+        let mut patch = crate::fill::min_area_fair::fill(&ctx).unwrap();
+        let checker = Checker::new(&mesh);
+        checker
+            .check_patch(&mesh, &hole.vertices, &patch, &policy.checks)
+            .unwrap();
+        // the new vertex nearest the boundary, pushed out over the mesh
+        let j = (0..patch.new_vertices.len())
+            .max_by(|&a, &b| {
+                patch.new_vertices[a]
+                    .length()
+                    .total_cmp(&patch.new_vertices[b].length())
+            })
+            .unwrap();
+        let p = patch.new_vertices[j];
+        patch.new_vertices[j] = p.normalize() * 0.75;
+        let err = checker
+            .check_patch(&mesh, &hole.vertices, &patch, &policy.checks)
+            .unwrap_err();
+        assert!(!culprits(&err).is_empty(), "{err}");
+        let fixed = repair_by_flips(&ctx, &checker, patch.clone(), err.clone())
+            .or_else(|| repair_by_retriangulation(&ctx, &checker, patch.clone(), err))
+            .expect("repaired");
+        checker
+            .check_patch(&mesh, &hole.vertices, &fixed, &policy.checks)
+            .unwrap();
+        assert!(fixed.new_vertices.len() < patch.new_vertices.len());
+        assert!(fixed.new_vertices.iter().all(|p| p.z.abs() < 1e-12));
+        // a patch that passes is returned unchanged by the wrapper
+        let variants = [("policy", policy.clone()), ("again", policy.clone())];
+        let good = crate::fill::min_area_fair::fill(&ctx).unwrap();
+        let got = first_passing(&ctx, &variants, crate::fill::min_area_fair::fill).unwrap();
+        assert_eq!(got, good);
+    }
+}
