@@ -6,7 +6,8 @@ Reads BENCH_OUT/results.csv (one row per system and mesh) and the repair logs th
 holefill runs wrote next to their outputs (BENCH_OUT/runs/<system>/<mesh>.obj.json).
 Distances are per mille of the bounding-box diagonal. APE S/M/L: mean over the meshes
 with ground truth of each mesh's per-class mean; q>1.39 % and val6 %: mean over all
-meshes; fill s: sum over all meshes. "by method" counts the holes whose repair log
+meshes; selfx / flip / nm / F lost: sums; fill s: sum over all meshes. A mesh whose
+run failed (a hole left open) has no APE, so its APE is left out of the means. "by method" counts the holes whose repair log
 names the forced method (or fan for a small hole): it must equal the holes closed.
 """
 import csv
@@ -35,7 +36,7 @@ def fmt(x, d=3):
     return "-" if x is None else f"{x:.{d}f}"
 
 
-print("| system | holes closed | by method | APE S | APE M | APE L | q>1.39 % | val6 % | selfx | fill s |")
+print("| system | holes closed | by method | APE S | APE M | APE L | q>1.39 % | val6 % | selfx / flip / nm / F lost | fill s |")
 print("|---|---|---|---|---|---|---|---|---|---|")
 for s in order:
     rs = [r for r in rows if r["system"] == s]
@@ -61,7 +62,10 @@ for s in order:
     ape = [None if a is None else 1000 * a for a in ape]
     q = mean(num(r["q_good_pct"]) for r in rs)
     v6 = mean(num(r["val6_pct"]) for r in rs)
-    sx = sum(int(num(r["selfx_faces"]) or 0) for r in rs)
+    sx = "/".join(
+        str(sum(int(num(r[c]) or 0) for r in rs))
+        for c in ("selfx_faces", "flipped_edges", "nm_edges", "in_faces_lost")
+    )
     fill = sum(num(r["fill_s"]) or 0 for r in rs)
     by = "-"
     if s in systems:
