@@ -341,7 +341,7 @@ pub struct Wavefront {
     pub curvature_restoration: bool,
     /// Out-of-plane placement of new points.
     pub placement: WavefrontPlacement,
-    /// Give up (and fall back) after this many front steps per boundary vertex.
+    /// After this many front steps per boundary vertex, close the rest as residual fronts.
     pub max_steps_per_vertex: usize,
     /// A new point closer than this times the hole's mean boundary edge length to a
     /// non-adjacent front vertex is merged into it.

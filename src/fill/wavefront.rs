@@ -79,9 +79,17 @@
 //!     if none is valid the vertex is put back with a penalty. When every vertex fails, one
 //!     step may use thin triangles (angle bound 0), and a front of at most 10 vertices is
 //!     closed by ear clipping without the overlap tests; slivers are flipped away at the
-//!     end where the patch triangle across their longest edge allows. Failing again, or more
-//!     than `max_steps_per_vertex · k` steps, ends with [`FillError::Failed`], so the
-//!     dispatcher falls back. Closes 1999 of 2000 random star-shaped loops.
+//!     end where the patch triangle across their longest edge allows. Failing again, or after
+//!     `max_steps_per_vertex · k` steps, every remaining front is closed as a residual loop
+//!     ([`residual`]: minimum-area triangulation in 3-D, refined to `Avglen`, thin-plate
+//!     faired against the triangles around it). Closes 1999 of 2000 random star-shaped
+//!     loops.
+//!   - the whole run is self-checked ([`retry`]): when its patch fails the dispatcher's
+//!     checks, a local repair (edge flips, then re-triangulation of the region around the
+//!     failing triangle) is tried, then the same method with the settings of [`variants`]
+//!     (the robust `interpolated` placement without restoration, the next seed, a short
+//!     front whose residual is closed as above, `alpha = 90`). On the shared bench
+//!     (35 holes) this closes every hole; before, 3 fronts got stuck or overlapped.
 //!
 //! Cost: a binary heap of front angles with lazy invalidation (only the vertices a step
 //! touches are re-measured) and spatial hashes of the front vertices and the triangles, so
@@ -90,8 +98,11 @@
 // `!(x > bound)` is used on purpose: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod residual;
+pub mod retry;
+
 use super::{FillContext, FillError, Patch};
-use crate::policy::{Wavefront, WavefrontPlacement};
+use crate::policy::{Policy, Wavefront, WavefrontPlacement};
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -127,9 +138,61 @@ const SMALL_FRONT: usize = 10;
 /// A triangle spanning more cells than this is kept in a list tested every time.
 const MAX_CELLS: i64 = 512;
 
-/// Fills the hole with the improved wavefront (policy section `[wavefront]`).
+/// Fills the hole with the improved wavefront (policy section `[wavefront]`): the
+/// policy's settings first; when their patch fails the checks, the variants of
+/// [`variants`] (see [`retry`]).
 pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
-    fill_with_stats(ctx).map(|(p, _)| p)
+    retry::first_passing(ctx, &variants(ctx.policy), |c| {
+        fill_with_stats(c).map(|(p, _)| p)
+    })
+}
+
+/// The policy, then the same method with the settings measured most robust on folded
+/// scanned holes (`placement = "interpolated"` without the restoration rotation, which
+/// can turn a triangle into its neighbour on a tight fold), then both with the next seed
+/// (other random draws), then `alpha = 90` (the paper's setting for some models).
+pub fn variants(policy: &Policy) -> Vec<(&'static str, Policy)> {
+    let mut out: Vec<(&'static str, Policy)> = vec![("policy", policy.clone())];
+    let mut plain = policy.clone();
+    plain.wavefront.placement = WavefrontPlacement::Interpolated;
+    plain.wavefront.curvature_restoration = false;
+    let mut push = |name: &'static str, p: Policy| {
+        if !out.iter().any(|(_, q)| *q == p) {
+            out.push((name, p));
+        }
+    };
+    push("interpolated, no restoration", plain.clone());
+    let mut s1 = policy.clone();
+    s1.seed = s1.seed.wrapping_add(1) & (i64::MAX as u64);
+    push("next seed", s1);
+    let mut s2 = plain.clone();
+    s2.seed = s2.seed.wrapping_add(1) & (i64::MAX as u64);
+    push("interpolated, no restoration, next seed", s2);
+    // a few rings of wavefront, the rest closed as a residual front (min-area,
+    // refined, faired against the rings): for large holes whose fronts climb or fold
+    for steps in [4, 2] {
+        if policy.wavefront.max_steps_per_vertex > steps {
+            let mut r = policy.clone();
+            r.wavefront.max_steps_per_vertex = steps;
+            push(
+                if steps == 4 {
+                    "4 steps per vertex, residual closed"
+                } else {
+                    "2 steps per vertex, residual closed"
+                },
+                r,
+            );
+        }
+    }
+    if policy.wavefront.alpha < 90.0 && policy.wavefront.beta > 90.0 {
+        let mut a = policy.clone();
+        a.wavefront.alpha = 90.0;
+        push("alpha 90", a);
+        let mut b = plain;
+        b.wavefront.alpha = 90.0;
+        push("interpolated, no restoration, alpha 90", b);
+    }
+    out
 }
 
 /// What a run did (for tests and diagnostics).
@@ -149,6 +212,8 @@ pub struct Stats {
     pub relaxed_steps: usize,
     /// Small stuck fronts closed by unchecked ear clipping.
     pub clipped_fronts: usize,
+    /// Stuck fronts closed by [`residual::close`].
+    pub residual_fronts: usize,
 }
 
 /// [`fill`], also returning what the run did.
@@ -733,10 +798,14 @@ impl Wave {
             steps += 1;
             self.stats.steps = steps;
             if steps > cap {
-                return Err(FillError::Failed(format!(
-                    "the front did not close within {cap} steps (max_steps_per_vertex = {})",
-                    opts.max_steps_per_vertex
-                )));
+                // out of steps: close what is left as residual fronts
+                return self.close_residual_fronts(ctx).map_err(|e| {
+                    FillError::Failed(format!(
+                        "the front did not close within {cap} steps (max_steps_per_vertex = {}) \
+                         and its residual could not be closed: {e}",
+                        opts.max_steps_per_vertex
+                    ))
+                });
             }
             let node = match self.peek() {
                 Some(e) if e.theta < mu && self.nodes[e.node as usize].fails == 0 => e.node,
@@ -766,13 +835,107 @@ impl Wave {
                     self.stats.relaxed_steps += 1;
                     stalls = 0;
                 } else if stalls > 2 * self.alive.len() + 16 {
-                    return Err(FillError::Failed(format!(
-                        "the front is stuck: none of its {} vertices can advance without an overlap, \
-                         a duplicate edge or a degenerate triangle",
-                        self.alive.len()
-                    )));
+                    // stuck: close every remaining front as a residual loop
+                    let left = self.alive.len();
+                    return self.close_residual_fronts(ctx).map_err(|e| {
+                        FillError::Failed(format!(
+                            "the front is stuck (none of its {left} vertices can advance without \
+                             an overlap, a duplicate edge or a degenerate triangle) and its \
+                             residual could not be closed: {e}"
+                        ))
+                    });
                 }
             }
+        }
+        Ok(())
+    }
+
+    /// Closes every remaining front with [`residual::close`] (see that module).
+    fn close_residual_fronts(&mut self, ctx: &FillContext) -> Result<(), FillError> {
+        while let Some(&start) = self.alive.first() {
+            ctx.deadline.check()?;
+            let f = self.nodes[start as usize].front as usize;
+            let mut ring = vec![start];
+            let mut a = self.nodes[start as usize].next;
+            while a != start {
+                if ring.len() > self.nodes.len() {
+                    return Err(FillError::Failed("internal error: open front".into()));
+                }
+                ring.push(a);
+                a = self.nodes[a as usize].next;
+            }
+            let verts: Vec<u32> = ring.iter().map(|&n| self.nodes[n as usize].vert).collect();
+            if verts.iter().collect::<HashSet<_>>().len() != verts.len() {
+                return Err(FillError::Failed(
+                    "the residual front passes a vertex twice".into(),
+                ));
+            }
+            let n = verts.len();
+            if n < 3 {
+                return Err(FillError::Failed(format!(
+                    "a residual front of {n} vertices"
+                )));
+            }
+            let pts: Vec<DVec3> = verts.iter().map(|&v| self.pos[v as usize]).collect();
+            let mut forbidden = HashSet::new();
+            for i in 0..n {
+                for j in i + 2..n {
+                    if (i, j) != (0, n - 1) && self.edge_exists(verts[i], verts[j]) {
+                        forbidden.insert((i as u32, j as u32));
+                    }
+                }
+            }
+            let on_ring: HashSet<u32> = verts.iter().copied().collect();
+            let mut outside = vec![None; n];
+            let mut context = Vec::new();
+            for t in &self.placed {
+                if !t
+                    .ids
+                    .iter()
+                    .any(|c| c.is_some_and(|c| on_ring.contains(&c)))
+                {
+                    continue;
+                }
+                context.push(t.p);
+                for c in 0..3 {
+                    if let (Some(a), Some(b)) = (t.ids[c], t.ids[(c + 1) % 3]) {
+                        // the triangle outside ring edge i -> i+1 holds the half-edge i+1 -> i
+                        if let Some(i) = verts.iter().position(|&x| x == b) {
+                            if verts[(i + 1) % n] == a && t.n != DVec3::ZERO {
+                                outside[i] = Some(t.n);
+                            }
+                        }
+                    }
+                }
+            }
+            let input = residual::Residual {
+                ring: &pts,
+                forbidden: &forbidden,
+                outside_normals: &outside,
+                context: &context,
+                edge_length: self.len,
+            };
+            let (new_pts, tris) = residual::close(&input, ctx.policy, &ctx.deadline)?;
+            let base = self.pos.len() as u32;
+            for p in new_pts {
+                self.pos.push(p);
+                self.acc.push(DVec3::ZERO);
+            }
+            let map = |i: u32| {
+                if (i as usize) < n {
+                    verts[i as usize]
+                } else {
+                    base + i - n as u32
+                }
+            };
+            for t in tris {
+                self.add_triangle(t.map(map));
+            }
+            for node in ring {
+                self.kill(node);
+            }
+            self.front_size[f] = 0;
+            self.stats.residual_fronts += 1;
         }
         Ok(())
     }
@@ -1985,11 +2148,11 @@ mod tests {
         let policy = Policy::default();
         let (_, r) = run(&mesh, l[..2].to_vec(), &policy);
         assert!(matches!(r, Err(FillError::Failed(_))));
-        // a step cap too small to close fails cleanly
+        // a step cap too small to close leaves a residual front, which is closed
         let mut policy = Policy::default();
         policy.wavefront.max_steps_per_vertex = 1;
-        let (_, r) = run(&mesh, l, &policy);
-        assert!(matches!(r, Err(FillError::Failed(_))), "{r:?}");
+        let (hole, r) = run(&mesh, l, &policy);
+        accept(&mesh, &hole, &r.unwrap(), &policy);
     }
 
     /// Through the dispatcher: a policy that names only `wavefront` fills the sphere
@@ -2087,6 +2250,49 @@ mod tests {
                 tried > 500 && ok * 100 >= tried * 99,
                 "zamp {zamp}: {ok} of {tried}"
             );
+        }
+    }
+
+    /// Regression (homer hole 3, cheburashka hole 1 of the shared bench: fronts stuck on
+    /// a folded loop or out of steps used to fail the method): a front stopped after one
+    /// step per boundary vertex is closed as a residual front, and the patch passes every
+    /// check of the dispatcher, stays within 0.05 of the unit sphere on average (0.12 at
+    /// most) and is the same bit for bit on a second run.
+    #[test]
+    fn a_stopped_front_is_closed_as_a_residual() {
+        let (mesh, _) = Mesh::from_raw(&sphere(4, 0.6));
+        let mut policy = Policy::default();
+        policy.wavefront.max_steps_per_vertex = 1;
+        let l = loop_near(&mesh, SPHERE_DIR.normalize());
+        let hole = Hole::new(0, &mesh, l, &policy);
+        let ctx = FillContext {
+            mesh: &mesh,
+            hole: &hole,
+            policy: &policy,
+            deadline: Deadline::none(),
+        };
+        let (patch, stats) = fill_with_stats(&ctx).unwrap();
+        assert!(stats.residual_fronts >= 1, "{stats:?}");
+        accept(&mesh, &hole, &patch, &policy);
+        crate::check::Checker::new(&mesh)
+            .check_patch(&mesh, &hole.vertices, &patch, &policy.checks)
+            .unwrap();
+        let (mean, max) = stats_of(&patch, |p| sphere_err(p).abs());
+        assert!(mean < 0.05 && max < 0.12, "{mean} {max}");
+        let (again, _) = fill_with_stats(&ctx).unwrap();
+        assert_eq!(again, patch);
+    }
+
+    /// The variants start with the policy itself and never repeat one.
+    #[test]
+    fn variants_start_with_the_policy() {
+        let p = Policy::default();
+        let v = variants(&p);
+        assert_eq!(v[0].1, p);
+        for i in 0..v.len() {
+            for j in i + 1..v.len() {
+                assert_ne!(v[i].1, v[j].1, "{} {}", v[i].0, v[j].0);
+            }
         }
     }
 }

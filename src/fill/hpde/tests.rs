@@ -537,3 +537,25 @@ fn non_injective_projection_is_a_clean_error() {
         ),
     }
 }
+
+/// The self-checked wrapper returns the policy's own patch when it passes the checks
+/// (so the variants change nothing on holes HPDE closes as the paper says).
+#[test]
+fn the_wrapper_keeps_a_passing_patch() {
+    let raw = crate::testutil::sphere_cap_removed(3, 1.0, DVec3::new(0.3, 0.2, 1.0), 0.6);
+    let (mesh, lp) = build(&raw, |_| true);
+    let policy = Policy::default();
+    let hole = Hole::new(0, &mesh, lp, &policy);
+    let ctx = FillContext {
+        mesh: &mesh,
+        hole: &hole,
+        policy: &policy,
+        deadline: Deadline::none(),
+    };
+    let once = fill_once(&ctx).unwrap();
+    crate::check::Checker::new(&mesh)
+        .check_patch(&mesh, &hole.vertices, &once, &policy.checks)
+        .unwrap();
+    assert_eq!(fill(&ctx).unwrap(), once);
+    assert_eq!(variants(&policy)[0].1, policy);
+}

@@ -1,0 +1,429 @@
+//! Self-checked attempts: the in-method fallback shared by `wavefront`, `hpde` and
+//! `lssvm_poisson`.
+//!
+//! The papers' methods are not robust on every scanned hole (paper 004's conclusion
+//! admits overlaps; paper 000 projects onto a plane that a folded loop does not project
+//! onto simply). Rather than hand such a hole to another method, a method here runs a
+//! short list of its own variants (the policy's settings first, then documented
+//! alternatives of the same method: another seed, another reading of a vague passage)
+//! and returns the first patch that passes the dispatcher's own checks
+//! ([`crate::check::Checker::check_patch`]: topology, degenerate triangles,
+//! intersections with itself and the mesh). The dispatcher checks the result again.
+//! With the policy's settings passing (most holes), the result is the same as without
+//! this wrapper; the list is fixed, so the output stays deterministic.
+
+use super::super::{FillContext, FillError, Patch};
+use crate::check::{CheckFailure, Checker};
+use crate::policy::Policy;
+use std::collections::{HashMap, HashSet};
+
+/// Runs `run` under each policy of `variants` (first = the policy as given) and returns
+/// the first patch that passes the checks, else a failure listing why each variant
+/// failed.
+pub fn first_passing(
+    ctx: &FillContext,
+    variants: &[(&str, Policy)],
+    run: impl Fn(&FillContext) -> Result<Patch, FillError>,
+) -> Result<Patch, FillError> {
+    first_passing_at(ctx, variants, |_, c| run(c))
+}
+
+/// [`first_passing`] for variants that are not only policies: `run` also gets the
+/// variant's index.
+pub fn first_passing_at(
+    ctx: &FillContext,
+    variants: &[(&str, Policy)],
+    run: impl Fn(usize, &FillContext) -> Result<Patch, FillError>,
+) -> Result<Patch, FillError> {
+    let mut checker: Option<Checker> = None;
+    let mut reasons: Vec<String> = Vec::new();
+    for (at, (name, pol)) in variants.iter().enumerate() {
+        ctx.deadline.check()?;
+        let sub = FillContext {
+            mesh: ctx.mesh,
+            hole: ctx.hole,
+            policy: pol,
+            deadline: ctx.deadline,
+        };
+        match run(at, &sub) {
+            Ok(p) => {
+                if variants.len() == 1 {
+                    return Ok(p);
+                }
+                let c = checker.get_or_insert_with(|| Checker::new(ctx.mesh));
+                match c.check_patch(ctx.mesh, &ctx.hole.vertices, &p, &ctx.policy.checks) {
+                    Ok(_) => return Ok(p),
+                    Err(e) => {
+                        if let Some(q) = repair_by_flips(ctx, c, p.clone(), e.clone()) {
+                            return Ok(q);
+                        }
+                        if let Some(q) = repair_by_retriangulation(ctx, c, p, e.clone()) {
+                            return Ok(q);
+                        }
+                        reasons.push(format!("{name}: {e}"))
+                    }
+                }
+            }
+            Err(FillError::Timeout) => return Err(FillError::Timeout),
+            Err(FillError::Failed(e)) => reasons.push(format!("{name}: {e}")),
+        }
+    }
+    if reasons.len() == 1 {
+        return Err(FillError::Failed(reasons.remove(0)));
+    }
+    Err(FillError::Failed(format!(
+        "every variant failed ({})",
+        reasons.join("; ")
+    )))
+}
+
+/// Rounds of [`repair_by_flips`].
+const REPAIR_ROUNDS: usize = 24;
+
+/// Patch triangles named by a failure: the failing one and, for a patch-patch
+/// intersection, the other.
+fn culprits(e: &CheckFailure) -> Vec<usize> {
+    match e {
+        CheckFailure::SelfIntersection(i, other) => {
+            let mut v = vec![*i];
+            if let Some(j) = other
+                .strip_prefix("patch triangle ")
+                .and_then(|r| r.trim().parse::<usize>().ok())
+            {
+                v.push(j);
+            }
+            v
+        }
+        CheckFailure::Degenerate(i, _) => vec![*i],
+        CheckFailure::Topology(_) => Vec::new(),
+    }
+}
+
+/// Local repair of a patch that fails the checks at a few triangles (a triangle
+/// spanning a fold of the loop, a sliver): flips an interior edge of a named triangle,
+/// keeping a flip when the patch then passes or fails at other triangles, for at most
+/// [`REPAIR_ROUNDS`] rounds. Only connectivity changes; no vertex moves. `None` when
+/// the patch still fails.
+fn repair_by_flips(
+    ctx: &FillContext,
+    checker: &Checker,
+    mut patch: Patch,
+    mut err: CheckFailure,
+) -> Option<Patch> {
+    let mut tried: HashSet<(u32, u32)> = HashSet::new();
+    for _ in 0..REPAIR_ROUNDS {
+        if ctx.deadline.check().is_err() {
+            return None;
+        }
+        let bad = culprits(&err);
+        if bad.is_empty() {
+            return None;
+        }
+        let mut owner: HashMap<(u32, u32), usize> = HashMap::new();
+        for (t, tri) in patch.triangles.iter().enumerate() {
+            for c in 0..3 {
+                owner.insert((tri[c], tri[(c + 1) % 3]), t);
+            }
+        }
+        let mut progressed = false;
+        'search: for &t in &bad {
+            let Some(&tri) = patch.triangles.get(t) else {
+                continue;
+            };
+            for c in 0..3 {
+                let (a, b, cc) = (tri[c], tri[(c + 1) % 3], tri[(c + 2) % 3]);
+                let Some(&u) = owner.get(&(b, a)) else {
+                    continue;
+                };
+                let other = patch.triangles[u];
+                let Some(&d) = other.iter().find(|&&x| x != a && x != b) else {
+                    continue;
+                };
+                if cc == d || owner.contains_key(&(cc, d)) || owner.contains_key(&(d, cc)) {
+                    continue;
+                }
+                if !tried.insert((a.min(b), a.max(b))) {
+                    continue;
+                }
+                let mut q = patch.clone();
+                q.triangles[t] = [a, d, cc];
+                q.triangles[u] = [b, cc, d];
+                match checker.check_patch(ctx.mesh, &ctx.hole.vertices, &q, &ctx.policy.checks) {
+                    Ok(_) => return Some(q),
+                    Err(e2) => {
+                        let named = culprits(&e2);
+                        // progress: the flipped pair is no longer what fails
+                        if !named.is_empty() && !named.iter().any(|x| *x == t || *x == u) {
+                            patch = q;
+                            err = e2;
+                            progressed = true;
+                            break 'search;
+                        }
+                    }
+                }
+            }
+        }
+        if !progressed {
+            return None;
+        }
+    }
+    None
+}
+
+/// Rounds of [`repair_by_retriangulation`] (each one grows the region by a ring).
+const RETRIANGULATE_ROUNDS: usize = 6;
+
+/// Local repair of a patch whose failure flips cannot mend (a triangle that jumps
+/// across a fold of the loop): the triangles around the named ones (those sharing a
+/// vertex with them) are removed, their interior new vertices dropped, and the small
+/// loop left is closed by the minimum-area triangulation in 3-D (no projection, so a
+/// folded boundary is closed along its fold). The region grows by one ring per round
+/// while the patch fails there. `None` when no round passes the checks.
+fn repair_by_retriangulation(
+    ctx: &FillContext,
+    checker: &Checker,
+    patch: Patch,
+    err: CheckFailure,
+) -> Option<Patch> {
+    use super::super::min_area_fair::{forbidden_chords, triangulate};
+    let k = ctx.hole.len();
+    let seeds = culprits(&err);
+    if seeds.is_empty() {
+        return None;
+    }
+    let mesh_chords = forbidden_chords(ctx.mesh, &ctx.hole.vertices);
+    let boundary = ctx.boundary_positions();
+    let pos_of = |p: &Patch, i: u32| {
+        let i = i as usize;
+        if i < k {
+            boundary[i]
+        } else {
+            p.new_vertices[i - k]
+        }
+    };
+    let mut region: HashSet<usize> = seeds.iter().copied().collect();
+    for _ in 0..RETRIANGULATE_ROUNDS {
+        if ctx.deadline.check().is_err() {
+            return None;
+        }
+        // grow by the triangles sharing a vertex with the region
+        let verts: HashSet<u32> = region
+            .iter()
+            .filter_map(|&t| patch.triangles.get(t))
+            .flat_map(|t| t.iter().copied())
+            .collect();
+        for (t, tri) in patch.triangles.iter().enumerate() {
+            if tri.iter().any(|v| verts.contains(v)) {
+                region.insert(t);
+            }
+        }
+        if region.len() == patch.triangles.len() && k > 3 {
+            // the whole patch: that is no longer a local repair
+            return None;
+        }
+        // the region's boundary, as directed edges of its triangles
+        let inside: HashSet<(u32, u32)> = region
+            .iter()
+            .flat_map(|&t| {
+                let tri = patch.triangles[t];
+                (0..3).map(move |c| (tri[c], tri[(c + 1) % 3]))
+            })
+            .collect();
+        let mut next: HashMap<u32, u32> = HashMap::new();
+        let mut simple = true;
+        for &(a, b) in &inside {
+            if !inside.contains(&(b, a)) && next.insert(a, b).is_some() {
+                simple = false;
+            }
+        }
+        if !simple || next.len() < 3 {
+            continue;
+        }
+        let start = *next.keys().min()?;
+        let mut ring = vec![start];
+        let mut v = next[&start];
+        while v != start {
+            if ring.len() > next.len() {
+                break;
+            }
+            ring.push(v);
+            v = *next.get(&v)?;
+        }
+        if ring.len() != next.len() {
+            continue;
+        }
+        // existing edges outside the region, and mesh chords between loop vertices
+        let mut outside_edges: HashSet<(u32, u32)> = HashSet::new();
+        for (t, tri) in patch.triangles.iter().enumerate() {
+            if !region.contains(&t) {
+                for c in 0..3 {
+                    let (a, b) = (tri[c], tri[(c + 1) % 3]);
+                    outside_edges.insert((a.min(b), a.max(b)));
+                }
+            }
+        }
+        let n = ring.len();
+        let mut forbidden = HashSet::new();
+        for i in 0..n {
+            for j in i + 2..n {
+                if (i, j) == (0, n - 1) {
+                    continue;
+                }
+                let (a, b) = (ring[i].min(ring[j]), ring[i].max(ring[j]));
+                if outside_edges.contains(&(a, b))
+                    || ((b as usize) < k && mesh_chords.contains(&(a, b)))
+                {
+                    forbidden.insert((i as u32, j as u32));
+                }
+            }
+        }
+        let pts: Vec<glam::DVec3> = ring.iter().map(|&v| pos_of(&patch, v)).collect();
+        let outside_normals = vec![None; n];
+        let input = triangulate::LoopInput {
+            pts: &pts,
+            forbidden: &forbidden,
+            outside_normals: &outside_normals,
+            weight: ctx.policy.refine.weight,
+            min_angle: ctx.policy.checks.min_angle_deg.max(0.0).to_radians(),
+            restricted_above: ctx.policy.refine.restricted_search_above,
+            deadline: ctx.deadline,
+        };
+        let Ok(fill) = triangulate::triangulate(&input) else {
+            continue;
+        };
+        // the new patch: triangles outside the region plus the fill; drop unused vertices
+        let mut tris: Vec<[u32; 3]> = patch
+            .triangles
+            .iter()
+            .enumerate()
+            .filter(|(t, _)| !region.contains(t))
+            .map(|(_, t)| *t)
+            .collect();
+        tris.extend(fill.iter().map(|t| t.map(|i| ring[i as usize])));
+        let mut used = vec![false; patch.new_vertices.len()];
+        for t in &tris {
+            for &v in t {
+                if v as usize >= k {
+                    used[v as usize - k] = true;
+                }
+            }
+        }
+        let mut remap = vec![u32::MAX; patch.new_vertices.len()];
+        let mut new_vertices = Vec::new();
+        for (j, &u) in used.iter().enumerate() {
+            if u {
+                remap[j] = (k + new_vertices.len()) as u32;
+                new_vertices.push(patch.new_vertices[j]);
+            }
+        }
+        let triangles = tris
+            .iter()
+            .map(|t| {
+                t.map(|v| {
+                    if (v as usize) < k {
+                        v
+                    } else {
+                        remap[v as usize - k]
+                    }
+                })
+            })
+            .collect();
+        let q = Patch {
+            new_vertices,
+            triangles,
+        };
+        if checker
+            .check_patch(ctx.mesh, &ctx.hole.vertices, &q, &ctx.policy.checks)
+            .is_ok()
+        {
+            return Some(q);
+        }
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fill::{Deadline, Hole};
+    use crate::mesh::Mesh;
+    use glam::DVec3;
+
+    /// A hole in a flat grid, filled by `min_area_fair`, then one new vertex is moved
+    /// outside the hole (onto the mesh, so its triangles overlap mesh faces): the flips
+    /// cannot mend that, the re-triangulation of the region around it does, and the
+    /// repaired patch passes every check.
+    #[test]
+    fn a_patch_overlapping_the_mesh_is_repaired_locally() {
+        let n = 16;
+        let mut raw = crate::io::RawMesh::default();
+        for j in 0..=n {
+            for i in 0..=n {
+                let x = -1.0 + 2.0 * i as f64 / n as f64;
+                let y = -1.0 + 2.0 * j as f64 / n as f64;
+                raw.positions.push(DVec3::new(x, y, 0.0));
+            }
+        }
+        let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
+        for j in 0..n {
+            for i in 0..n {
+                for f in [
+                    [id(i, j), id(i + 1, j), id(i + 1, j + 1)],
+                    [id(i, j), id(i + 1, j + 1), id(i, j + 1)],
+                ] {
+                    let c = f.iter().map(|&v| raw.positions[v as usize]).sum::<DVec3>() / 3.0;
+                    if c.length() > 0.55 {
+                        raw.faces.push(f);
+                    }
+                }
+            }
+        }
+        let (mesh, _) = Mesh::from_raw(&raw);
+        let policy = Policy::default();
+        let lp = mesh
+            .topo
+            .boundary_loops()
+            .into_iter()
+            .min_by(|a, b| a.len().cmp(&b.len()))
+            .unwrap();
+        let hole = Hole::new(0, &mesh, lp, &policy);
+        let ctx = FillContext {
+            mesh: &mesh,
+            hole: &hole,
+            policy: &policy,
+            deadline: Deadline::none(),
+        };
+        let mut patch = crate::fill::min_area_fair::fill(&ctx).unwrap();
+        let checker = Checker::new(&mesh);
+        checker
+            .check_patch(&mesh, &hole.vertices, &patch, &policy.checks)
+            .unwrap();
+        // the new vertex nearest the boundary, pushed out over the mesh
+        let j = (0..patch.new_vertices.len())
+            .max_by(|&a, &b| {
+                patch.new_vertices[a]
+                    .length()
+                    .total_cmp(&patch.new_vertices[b].length())
+            })
+            .unwrap();
+        let p = patch.new_vertices[j];
+        patch.new_vertices[j] = p.normalize() * 0.75;
+        let err = checker
+            .check_patch(&mesh, &hole.vertices, &patch, &policy.checks)
+            .unwrap_err();
+        assert!(!culprits(&err).is_empty(), "{err}");
+        let fixed = repair_by_flips(&ctx, &checker, patch.clone(), err.clone())
+            .or_else(|| repair_by_retriangulation(&ctx, &checker, patch.clone(), err))
+            .expect("repaired");
+        checker
+            .check_patch(&mesh, &hole.vertices, &fixed, &policy.checks)
+            .unwrap();
+        assert!(fixed.new_vertices.len() < patch.new_vertices.len());
+        assert!(fixed.new_vertices.iter().all(|p| p.z.abs() < 1e-12));
+        // a patch that passes is returned unchanged by the wrapper
+        let variants = [("policy", policy.clone()), ("again", policy.clone())];
+        let good = crate::fill::min_area_fair::fill(&ctx).unwrap();
+        let got = first_passing(&ctx, &variants, crate::fill::min_area_fair::fill).unwrap();
+        assert_eq!(got, good);
+    }
+}
