@@ -3,7 +3,7 @@
 //! orientation and non-manifold vertices. Nothing here panics on bad input; what was
 //! resolved is counted in [`BuildReport`].
 
-use super::{HalfedgeId, Mesh, Topology, VertexId};
+use super::{group_by_key, HalfedgeId, Mesh, Topology, VertexId};
 use crate::io::RawMesh;
 use serde::Serialize;
 
@@ -51,7 +51,6 @@ impl Mesh {
 
         // 1. drop faces that cannot be triangles
         let mut faces: Vec<[u32; 3]> = Vec::with_capacity(raw.faces.len());
-        let mut seen = std::collections::HashSet::with_capacity(raw.faces.len());
         for f in &raw.faces {
             if f.iter().any(|&i| i as usize >= nv) {
                 rep.out_of_range_faces += 1;
@@ -66,53 +65,85 @@ impl Mesh {
                 rep.zero_area_faces += 1;
                 continue;
             }
-            let mut key = *f;
-            key.sort_unstable();
-            if !seen.insert(key) {
-                rep.duplicate_faces += 1;
-                continue;
-            }
             faces.push(*f);
         }
-        drop(seen);
+        // duplicates (the same three vertices, any order): the first one is kept.
+        // Faces grouped by their smallest vertex (a counting sort, no hashing), then
+        // each group sorted by its vertex triple and face number.
+        let sorted = |f: [u32; 3]| {
+            let mut k = f;
+            k.sort_unstable();
+            k
+        };
+        let mut dup = vec![false; faces.len()];
+        {
+            let (off, mut group) = group_by_key(nv, faces.len(), |i| {
+                faces[i].iter().copied().min().unwrap_or(0) as usize
+            });
+            for v in 0..nv {
+                let g = &mut group[off[v] as usize..off[v + 1] as usize];
+                if g.len() < 2 {
+                    continue;
+                }
+                g.sort_unstable_by_key(|&i| (sorted(faces[i as usize]), i));
+                for w in g.windows(2) {
+                    if sorted(faces[w[0] as usize]) == sorted(faces[w[1] as usize]) {
+                        dup[w[1] as usize] = true;
+                    }
+                }
+            }
+        }
+        rep.duplicate_faces = dup.iter().filter(|&&d| d).count();
+        if rep.duplicate_faces > 0 {
+            let mut k = 0;
+            faces.retain(|_| {
+                k += 1;
+                !dup[k - 1]
+            });
+        }
+        drop(dup);
+        faces.shrink_to_fit();
         let nf = faces.len();
 
-        // 2. pair half-edges by undirected edge (sort, then group)
-        let mut keyed: Vec<(u64, u32)> = Vec::with_capacity(nf * 3);
-        for (fi, f) in faces.iter().enumerate() {
-            for c in 0..3 {
-                let (a, b) = (f[c], f[(c + 1) % 3]);
-                let key = ((a.min(b) as u64) << 32) | a.max(b) as u64;
-                keyed.push((key, (fi * 3 + c) as u32));
-            }
-        }
-        keyed.sort_unstable();
+        // 2. pair half-edges by undirected edge: half-edges grouped by their smaller
+        // vertex (a counting sort), each group sorted by the larger vertex and the
+        // half-edge number, so equal edges are adjacent in (edge, half-edge) order
+        let from = |faces: &Vec<[u32; 3]>, h: u32| faces[(h / 3) as usize][(h % 3) as usize];
+        let to = |faces: &Vec<[u32; 3]>, h: u32| faces[(h / 3) as usize][((h % 3 + 1) % 3) as usize];
+        let (off, mut halfedges) = group_by_key(nv, nf * 3, |h| {
+            from(&faces, h as u32).min(to(&faces, h as u32)) as usize
+        });
         // candidate pairs (h1, h2), not yet checked for orientation
         let mut pairs: Vec<(u32, u32)> = Vec::with_capacity(nf * 3 / 2);
-        let from = |faces: &Vec<[u32; 3]>, h: u32| faces[(h / 3) as usize][(h % 3) as usize];
-        let mut i = 0;
-        while i < keyed.len() {
-            let mut j = i + 1;
-            while j < keyed.len() && keyed[j].0 == keyed[i].0 {
-                j += 1;
+        for v in 0..nv {
+            let g = &mut halfedges[off[v] as usize..off[v + 1] as usize];
+            g.sort_unstable_by_key(|&h| (from(&faces, h).max(to(&faces, h)), h));
+            let far = |h: u32| from(&faces, h).max(to(&faces, h));
+            let mut i = 0;
+            while i < g.len() {
+                let mut j = i + 1;
+                while j < g.len() && far(g[j]) == far(g[i]) {
+                    j += 1;
+                }
+                let group = &g[i..j];
+                if group.len() == 2 {
+                    pairs.push((group[0], group[1]));
+                } else if group.len() > 2 {
+                    rep.non_manifold_edges += 1;
+                    // keep the first pair of opposite direction (else the first two)
+                    let h0 = group[0];
+                    let opp = group[1..]
+                        .iter()
+                        .find(|&&g| from(&faces, g) != from(&faces, h0))
+                        .copied()
+                        .unwrap_or(group[1]);
+                    pairs.push((h0, opp));
+                }
+                i = j;
             }
-            let group = &keyed[i..j];
-            if group.len() == 2 {
-                pairs.push((group[0].1, group[1].1));
-            } else if group.len() > 2 {
-                rep.non_manifold_edges += 1;
-                // keep the first pair of opposite direction (else the first two)
-                let h0 = group[0].1;
-                let opp = group[1..]
-                    .iter()
-                    .find(|g| from(&faces, g.1) != from(&faces, h0))
-                    .map(|g| g.1)
-                    .unwrap_or(group[1].1);
-                pairs.push((h0, opp));
-            }
-            i = j;
         }
-        drop(keyed);
+        drop(halfedges);
+        drop(off);
 
         // 3. orient: breadth-first over the pairs, flipping faces to agree
         let mut adj_start = vec![0u32; nf + 1];
