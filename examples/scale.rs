@@ -130,7 +130,11 @@ pub fn capped_sphere(k: usize) -> RawMesh {
         for i in 0..k {
             // alternate rings are offset by half a step: near-equilateral triangles
             let ph = std::f64::consts::TAU * (i as f64 + 0.5 * (r % 2) as f64) / k as f64;
-            positions.push(DVec3::new(th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()));
+            positions.push(DVec3::new(
+                th.sin() * ph.cos(),
+                th.sin() * ph.sin(),
+                th.cos(),
+            ));
         }
     }
     positions.push(DVec3::new(0.0, 0.0, -1.0));
@@ -178,7 +182,11 @@ fn run_child(bin: &Path, args: &[&str], timeout: Duration) -> Result<Run> {
     let rss_file = tempfile::NamedTempFile::new()?;
     let mut cmd = if use_time {
         let mut c = Command::new("/usr/bin/time");
-        c.arg("-f").arg("%M").arg("-o").arg(rss_file.path()).arg(bin);
+        c.arg("-f")
+            .arg("%M")
+            .arg("-o")
+            .arg(rss_file.path())
+            .arg(bin);
         c
     } else {
         Command::new(bin)
@@ -188,7 +196,9 @@ fn run_child(bin: &Path, args: &[&str], timeout: Duration) -> Result<Run> {
         .stderr(Stdio::piped())
         .stdin(Stdio::null());
     let t = Instant::now();
-    let mut child = cmd.spawn().with_context(|| format!("starting {}", bin.display()))?;
+    let mut child = cmd
+        .spawn()
+        .with_context(|| format!("starting {}", bin.display()))?;
     let mut stderr = child.stderr.take();
     let err_reader = std::thread::spawn(move || {
         let mut s = String::new();
@@ -409,6 +419,49 @@ fn cell(run: &Run, report: &Path, limit_ms: u64) -> String {
     }
 }
 
+/// CPU time of this thread (from /proc/thread-self/schedstat), else wall time.
+fn cpu_now() -> Duration {
+    std::fs::read_to_string("/proc/thread-self/schedstat")
+        .ok()
+        .and_then(|s| s.split_whitespace().next()?.parse::<u64>().ok())
+        .map(Duration::from_nanos)
+        .unwrap_or_else(|| Instant::now().elapsed())
+}
+
+/// Times the stages of a repair that do not depend on the holes (CPU time of the
+/// main thread and wall time), for profiling the pipeline on huge scans.
+fn phases(file: &Path) -> Result<()> {
+    let mut t = (Instant::now(), cpu_now());
+    let mut lap = |what: &str| {
+        let now = (Instant::now(), cpu_now());
+        println!(
+            "{what:<28} {:>8.3} s wall {:>8.3} s cpu",
+            (now.0 - t.0).as_secs_f64(),
+            (now.1.saturating_sub(t.1)).as_secs_f64()
+        );
+        t = (Instant::now(), cpu_now());
+    };
+    let raw = holefill::read(file, None)?;
+    lap("read");
+    let (mesh, _) = holefill::mesh::Mesh::from_raw(&raw);
+    lap("Mesh::from_raw");
+    mesh.validate().map_err(anyhow::Error::msg)?;
+    lap("Mesh::validate");
+    let loops = mesh.topo.boundary_loops();
+    lap("boundary_loops");
+    let checker = holefill::check::Checker::new(&mesh);
+    lap("Checker::new");
+    drop(checker);
+    let out = mesh.to_raw(&raw);
+    lap("Mesh::to_raw");
+    let dir = tempfile::tempdir()?;
+    let ext = file.extension().and_then(|e| e.to_str()).unwrap_or("ply");
+    holefill::write(&dir.path().join(format!("out.{ext}")), &out, None)?;
+    lap("write");
+    println!("{} loops", loops.len());
+    Ok(())
+}
+
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.first().map(String::as_str) == Some("gen") {
@@ -426,6 +479,12 @@ fn main() -> Result<()> {
         );
         return Ok(());
     }
+    if args.first().map(String::as_str) == Some("phases") {
+        let [_, file] = args.as_slice() else {
+            bail!("usage: scale phases FILE");
+        };
+        return phases(Path::new(file));
+    }
     let mut sizes = vec![100_000, 1_000_000, 10_000_000];
     let mut ks = vec![50, 200, 1000, 10_000];
     let mut limit_ms = 60_000u64;
@@ -442,7 +501,10 @@ fn main() -> Result<()> {
         }
     }
     if !bin.exists() {
-        bail!("{} not found: run cargo build --release first", bin.display());
+        bail!(
+            "{} not found: run cargo build --release first",
+            bin.display()
+        );
     }
     let dir = tempfile::tempdir()?;
     println!(

@@ -109,7 +109,8 @@ impl Mesh {
         // vertex (a counting sort), each group sorted by the larger vertex and the
         // half-edge number, so equal edges are adjacent in (edge, half-edge) order
         let from = |faces: &Vec<[u32; 3]>, h: u32| faces[(h / 3) as usize][(h % 3) as usize];
-        let to = |faces: &Vec<[u32; 3]>, h: u32| faces[(h / 3) as usize][((h % 3 + 1) % 3) as usize];
+        let to =
+            |faces: &Vec<[u32; 3]>, h: u32| faces[(h / 3) as usize][((h % 3 + 1) % 3) as usize];
         let (off, mut halfedges) = group_by_key(nv, nf * 3, |h| {
             from(&faces, h as u32).min(to(&faces, h as u32)) as usize
         });
@@ -145,72 +146,79 @@ impl Mesh {
         drop(halfedges);
         drop(off);
 
-        // 3. orient: breadth-first over the pairs, flipping faces to agree
-        let mut adj_start = vec![0u32; nf + 1];
-        for &(a, b) in &pairs {
-            adj_start[(a / 3) as usize + 1] += 1;
-            adj_start[(b / 3) as usize + 1] += 1;
-        }
-        for k in 0..nf {
-            adj_start[k + 1] += adj_start[k];
-        }
-        let mut fill = adj_start.clone();
-        let mut adj = vec![0u32; adj_start[nf] as usize]; // pair index
-        for (pi, &(a, b)) in pairs.iter().enumerate() {
-            for h in [a, b] {
-                let f = (h / 3) as usize;
-                adj[fill[f] as usize] = pi as u32;
-                fill[f] += 1;
-            }
-        }
-        drop(fill);
-        let mut flip: Vec<Option<bool>> = vec![None; nf];
+        // 3. orient: breadth-first over the pairs, flipping faces to agree. When every
+        // pair already runs in opposite directions (a consistently oriented input, the
+        // usual case) the search would flip nothing and cut nothing: skipped.
+        let consistent = pairs
+            .iter()
+            .all(|&(a, b)| from(&faces, a) != from(&faces, b));
+        let mut flip: Vec<Option<bool>> = vec![consistent.then_some(false); nf];
         let mut cut = vec![false; pairs.len()];
-        let mut queue = std::collections::VecDeque::new();
-        let mut component: Vec<usize> = Vec::new();
-        for seed in 0..nf {
-            if flip[seed].is_some() {
-                continue;
+        if !consistent {
+            let mut adj_start = vec![0u32; nf + 1];
+            for &(a, b) in &pairs {
+                adj_start[(a / 3) as usize + 1] += 1;
+                adj_start[(b / 3) as usize + 1] += 1;
             }
-            flip[seed] = Some(false);
-            queue.push_back(seed);
-            component.clear();
-            while let Some(f) = queue.pop_front() {
-                component.push(f);
-                let ff = flip[f].unwrap_or(false);
-                for k in adj_start[f]..adj_start[f + 1] {
-                    let pi = adj[k as usize] as usize;
-                    if cut[pi] {
-                        continue;
-                    }
-                    let (a, b) = pairs[pi];
-                    let (mine, other) = if (a / 3) as usize == f {
-                        (a, b)
-                    } else {
-                        (b, a)
-                    };
-                    let g = (other / 3) as usize;
-                    let same_dir = from(&faces, mine) == from(&faces, other);
-                    // after flips the two must run in opposite directions
-                    let want = ff ^ same_dir;
-                    match flip[g] {
-                        None => {
-                            flip[g] = Some(want);
-                            queue.push_back(g);
-                        }
-                        Some(x) if x != want => {
-                            cut[pi] = true;
-                            rep.orientation_cuts += 1;
-                        }
-                        _ => {}
-                    }
+            for k in 0..nf {
+                adj_start[k + 1] += adj_start[k];
+            }
+            let mut fill = adj_start.clone();
+            let mut adj = vec![0u32; adj_start[nf] as usize]; // pair index
+            for (pi, &(a, b)) in pairs.iter().enumerate() {
+                for h in [a, b] {
+                    let f = (h / 3) as usize;
+                    adj[fill[f] as usize] = pi as u32;
+                    fill[f] += 1;
                 }
             }
-            // keep the orientation most of the component already has
-            let flipped = component.iter().filter(|&&f| flip[f] == Some(true)).count();
-            if flipped * 2 > component.len() {
-                for &f in &component {
-                    flip[f] = flip[f].map(|x| !x);
+            drop(fill);
+            let mut queue = std::collections::VecDeque::new();
+            let mut component: Vec<usize> = Vec::new();
+            for seed in 0..nf {
+                if flip[seed].is_some() {
+                    continue;
+                }
+                flip[seed] = Some(false);
+                queue.push_back(seed);
+                component.clear();
+                while let Some(f) = queue.pop_front() {
+                    component.push(f);
+                    let ff = flip[f].unwrap_or(false);
+                    for k in adj_start[f]..adj_start[f + 1] {
+                        let pi = adj[k as usize] as usize;
+                        if cut[pi] {
+                            continue;
+                        }
+                        let (a, b) = pairs[pi];
+                        let (mine, other) = if (a / 3) as usize == f {
+                            (a, b)
+                        } else {
+                            (b, a)
+                        };
+                        let g = (other / 3) as usize;
+                        let same_dir = from(&faces, mine) == from(&faces, other);
+                        // after flips the two must run in opposite directions
+                        let want = ff ^ same_dir;
+                        match flip[g] {
+                            None => {
+                                flip[g] = Some(want);
+                                queue.push_back(g);
+                            }
+                            Some(x) if x != want => {
+                                cut[pi] = true;
+                                rep.orientation_cuts += 1;
+                            }
+                            _ => {}
+                        }
+                    }
+                }
+                // keep the orientation most of the component already has
+                let flipped = component.iter().filter(|&&f| flip[f] == Some(true)).count();
+                if flipped * 2 > component.len() {
+                    for &f in &component {
+                        flip[f] = flip[f].map(|x| !x);
+                    }
                 }
             }
         }
