@@ -170,6 +170,8 @@ pub fn capped_sphere(k: usize) -> RawMesh {
 struct Run {
     wall: Duration,
     max_rss_kb: Option<u64>,
+    /// User plus system CPU time (from `/usr/bin/time`).
+    cpu_s: Option<f64>,
     status: Option<i32>,
     killed: bool,
     stderr: String,
@@ -183,7 +185,7 @@ fn run_child(bin: &Path, args: &[&str], timeout: Duration) -> Result<Run> {
     let mut cmd = if use_time {
         let mut c = Command::new("/usr/bin/time");
         c.arg("-f")
-            .arg("%M")
+            .arg("%M %U %S")
             .arg("-o")
             .arg(rss_file.path())
             .arg(bin);
@@ -225,16 +227,28 @@ fn run_child(bin: &Path, args: &[&str], timeout: Duration) -> Result<Run> {
     };
     let wall = t.elapsed();
     let stderr = err_reader.join().unwrap_or_default();
+    // "%M %U %S" on the last line (a killed child adds a line before it)
+    let timed: Vec<String> = std::fs::read_to_string(rss_file.path())
+        .ok()
+        .and_then(|s| s.lines().last().map(str::to_string))
+        .map(|l| l.split_whitespace().map(str::to_string).collect())
+        .unwrap_or_default();
     let max_rss_kb = if use_time {
-        std::fs::read_to_string(rss_file.path())
-            .ok()
-            .and_then(|s| s.lines().last().and_then(|l| l.trim().parse().ok()))
+        timed.first().and_then(|v| v.parse().ok())
     } else {
         hwm
+    };
+    let cpu_s = match (timed.get(1), timed.get(2)) {
+        (Some(u), Some(s)) => match (u.parse::<f64>(), s.parse::<f64>()) {
+            (Ok(u), Ok(s)) => Some(u + s),
+            _ => None,
+        },
+        _ => None,
     };
     Ok(Run {
         wall,
         max_rss_kb,
+        cpu_s,
         status: status.code(),
         killed,
         stderr,
@@ -283,8 +297,10 @@ fn default_bin() -> PathBuf {
 }
 
 fn mesh_table(bin: &Path, sizes: &[usize], dir: &Path) -> Result<()> {
-    println!("| faces | holes | file MB | end-to-end s | peak memory MB | filled / holes |");
-    println!("|---:|---:|---:|---:|---:|---|");
+    println!(
+        "| faces | holes | file MB | end-to-end s (wall) | CPU s (user + sys) | peak memory MB | filled / holes |"
+    );
+    println!("|---:|---:|---:|---:|---:|---:|---|");
     for &n in sizes {
         let raw = torus_scan(n, 100, 1);
         let input = dir.join(format!("torus-{n}.ply"));
@@ -314,10 +330,13 @@ fn mesh_table(bin: &Path, sizes: &[usize], dir: &Path) -> Result<()> {
             })
             .unwrap_or_else(|| format!("exit {:?}: {}", run.status, run.stderr.trim()));
         println!(
-            "| {} ({nfaces}) | 100 | {:.0} | {:.2} | {} | {} |",
+            "| {} ({nfaces}) | 100 | {:.0} | {:.2} | {} | {} | {} |",
             human(n),
             bytes as f64 / 1e6,
             run.wall.as_secs_f64(),
+            run.cpu_s
+                .map(|c| format!("{c:.2}"))
+                .unwrap_or_else(|| "?".into()),
             run.max_rss_kb
                 .map(|k| format!("{:.0}", k as f64 / 1024.0))
                 .unwrap_or_else(|| "?".into()),
