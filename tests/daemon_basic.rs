@@ -1,6 +1,6 @@
 //! `holefill watch` against the real binary and real folders: files renamed in and
-//! written in place, a malformed file, a name collision, a file over a limit, SIGHUP
-//! with a broken policy.
+//! written in place, a malformed file, a name collision, a file over a limit, read
+//! limits enforced by the worker, SIGHUP with a broken policy.
 
 mod daemon_support;
 use daemon_support::*;
@@ -390,4 +390,45 @@ fn collision_overwrite_replaces_the_earlier_output_when_asked() {
         "earlier output"
     );
     assert_eq!(Folders::log(&f.outbox, "scan.obj")["status"], "repaired");
+}
+
+#[test]
+fn read_limits_are_passed_to_the_worker() {
+    // Two quads: the header declares 2 faces (the daemon's sniff lets it through
+    // max_faces = 3), but they are 4 triangles, which the worker's reader refuses.
+    let quads = "ply\nformat ascii 1.0\nelement vertex 6\nproperty float x\n\
+                 property float y\nproperty float z\nelement face 2\n\
+                 property list uchar int vertex_indices\nend_header\n\
+                 0 0 0\n1 0 0\n2 0 0\n0 1 0\n1 1 0\n2 1 0\n4 0 1 4 3\n4 1 2 5 4\n";
+    // 7 vertices (nothing counts vertices before the worker reads them)
+    let many = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 2 0 0\nv 2 1 0\nv 3 3 0\nf 1 2 3\n";
+    // within both limits
+    let few = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 4\nf 1 4 3\n";
+    let f = Folders::new();
+    let d = Daemon::ready(&f, &["--max-faces", "3", "--max-vertices", "6"], &[]);
+    drop_renamed(&f.inbox, "quads.ply", quads);
+    drop_renamed(&f.inbox, "many.obj", many);
+    drop_renamed(&f.inbox, "few.obj", few);
+    assert!(
+        wait_until(LONG, || Folders::files(&f.failed).len() == 4
+            && f.models().len() == 1),
+        "failed {:?}, outbox {:?}\n{}",
+        Folders::files(&f.failed),
+        Folders::files(&f.outbox),
+        d.log()
+    );
+    assert_eq!(f.models(), vec!["few.obj"]);
+    for (name, limit) in [
+        ("quads.ply", "max_faces = 3"),
+        ("many.obj", "max_vertices = 6"),
+    ] {
+        let log = Folders::log(&f.failed, name);
+        assert_eq!(log["status"], "failed", "{log}");
+        let error = log["error"].as_str().unwrap_or_default();
+        assert!(
+            error.contains(limit) && error.contains("configured limit"),
+            "{name}: {log}"
+        );
+        assert!(f.failed.join(name).is_file(), "{name} kept in failed/");
+    }
 }

@@ -57,6 +57,7 @@ pub struct FileConfig {
     pub max_attempts: Option<u32>,
     pub max_file_bytes: Option<u64>,
     pub max_faces: Option<u64>,
+    pub max_vertices: Option<u64>,
     pub time_limit_secs: Option<u64>,
     pub memory_limit_mb: Option<u64>,
     pub grace_secs: Option<u64>,
@@ -106,6 +107,8 @@ pub struct Settings {
     pub max_file_bytes: u64,
     /// 0: no limit.
     pub max_faces: u64,
+    /// 0: no limit.
+    pub max_vertices: u64,
     /// `None`: no limit.
     pub time_limit: Option<Duration>,
     /// 0: no limit.
@@ -179,6 +182,7 @@ impl Settings {
                 .or(file.max_file_bytes)
                 .unwrap_or(2 << 30),
             max_faces: args.max_faces.or(file.max_faces).unwrap_or(0),
+            max_vertices: args.max_vertices.or(file.max_vertices).unwrap_or(0),
             time_limit: match args.time_limit_secs.or(file.time_limit_secs).unwrap_or(600) {
                 0 => None,
                 n => Some(Duration::from_secs(n)),
@@ -359,6 +363,7 @@ mod tests {
             "max_attempts",
             "max_file_bytes",
             "max_faces",
+            "max_vertices",
             "time_limit_secs",
             "memory_limit_mb",
             "grace_secs",

@@ -84,6 +84,10 @@ pub struct WatchArgs {
     /// Files declaring more faces go to failed; 0: no limit [default: 0].
     #[arg(long)]
     pub max_faces: Option<u64>,
+    /// Files with more vertices go to failed (the worker stops reading at the limit);
+    /// 0: no limit [default: 0].
+    #[arg(long)]
+    pub max_vertices: Option<u64>,
     /// Wall-clock limit of one repair; 0: none [default: 600].
     #[arg(long)]
     pub time_limit_secs: Option<u64>,

@@ -456,6 +456,18 @@ async fn run_child(
     if let Some(p) = &ctx.policy {
         cmd.arg("--policy").arg(p);
     }
+    // the read limits, enforced by the reader too: the header sniff above cannot
+    // count vertices, nor triangles of fanned polygons
+    let s = &ctx.settings;
+    for (flag, value) in [
+        ("--max-file-bytes", s.max_file_bytes),
+        ("--max-faces", s.max_faces),
+        ("--max-vertices", s.max_vertices),
+    ] {
+        if value > 0 {
+            cmd.arg(flag).arg(value.to_string());
+        }
+    }
     cmd.stdin(Stdio::null())
         .stdout(Stdio::null())
         .stderr(Stdio::piped())

@@ -21,23 +21,128 @@ use std::io::{BufRead, Read, Write};
 use std::path::Path;
 
 /// Welds corners into vertices by exact position. The key is the coordinates' bit
-/// pattern: `[u64; 3]` of `f64` (ASCII STL) or [`Key32`] of `f32` (binary STL, half
-/// the memory per entry, so the map stays in cache longer).
+/// pattern, `[u64; 3]` of `f64` (ASCII STL; binary STL uses [`Welder32`]).
 struct Welder<K = [u64; 3]> {
     map: HashMap<K, u32, FastBuild>,
     corners: u64,
     max: u64,
 }
 
-/// The exact position of a binary STL corner: `x | y << 32` and `z` as `f32` bits.
-#[derive(PartialEq, Eq, Clone, Copy)]
-struct Key32(u64, u32);
+/// Welds binary STL corners by the bit pattern of their `f32` coordinates, in a
+/// compact open-addressing table: 4-byte slots holding vertex numbers (linear
+/// probing, at most half full), the keys kept in vertex order. A quarter of the
+/// memory of a general hash map per vertex, so the table of a 10M-face scan stays
+/// mostly in the processor's cache; the keys of recent vertices, which most corners
+/// repeat, are in cache too.
+struct Welder32 {
+    /// The vertex last found for each of `RECENT` hash classes, checked before the
+    /// table: a scan's corners mostly repeat within a few thousand vertices, so most
+    /// lookups never touch the large table.
+    recent: Vec<u32>,
+    slots: Vec<u32>,
+    keys: Vec<[u32; 3]>,
+    corners: u64,
+    max: u64,
+}
 
-impl std::hash::Hash for Key32 {
-    fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
-        state.write_u64(self.0);
-        state.write_u64(u64::from(self.1));
+/// An empty slot (never a vertex number: vertices are fewer than `u32::MAX`).
+const EMPTY: u32 = u32::MAX;
+
+/// Entries of [`Welder32::recent`] (16 KiB).
+const RECENT: usize = 4096;
+
+impl Welder32 {
+    fn new(expected: usize, max: u64) -> Self {
+        let cap = (expected.max(8) * 2).next_power_of_two();
+        Welder32 {
+            recent: vec![EMPTY; RECENT],
+            slots: vec![EMPTY; cap],
+            keys: Vec::with_capacity(expected),
+            corners: 0,
+            max: max.min(MAX_ELEMENTS - 1),
+        }
     }
+
+    fn hash(k: &[u32; 3]) -> usize {
+        let mut h = (u64::from(k[0]) | u64::from(k[1]) << 32).wrapping_mul(0x9e37_79b9_7f4a_7c15)
+            ^ u64::from(k[2]).wrapping_mul(0xc2b2_ae3d_27d4_eb4f);
+        // murmur3 fmix64: every key bit reaches the low (slot) bits
+        h ^= h >> 33;
+        h = h.wrapping_mul(0xff51_afd7_ed55_8ccd);
+        h ^= h >> 33;
+        h = h.wrapping_mul(0xc4ce_b9fe_1a85_ec53);
+        (h ^ (h >> 33)) as usize
+    }
+
+    /// The vertex at the (finite) `f32` position `p` (a new one when no earlier
+    /// corner had exactly this position; `-0.0` counts as `+0.0`); `None` past the
+    /// vertex cap.
+    fn vertex32(&mut self, p: [f32; 3], positions: &mut Vec<DVec3>) -> Option<u32> {
+        self.corners += 1;
+        // `+ 0.0` turns -0.0 into +0.0 and leaves every other value unchanged.
+        let key = p.map(|c| (c + 0.0).to_bits());
+        let h = Self::hash(&key);
+        let r = (h >> 40) % RECENT;
+        let s = self.recent[r];
+        if s != EMPTY && self.keys[s as usize] == key {
+            return Some(s);
+        }
+        let mask = self.slots.len() - 1;
+        let mut i = h & mask;
+        loop {
+            let s = self.slots[i];
+            if s == EMPTY {
+                break;
+            }
+            if self.keys[s as usize] == key {
+                self.recent[r] = s;
+                return Some(s);
+            }
+            i = (i + 1) & mask;
+        }
+        let next = self.keys.len();
+        if next as u64 >= self.max {
+            return None;
+        }
+        self.slots[i] = next as u32;
+        self.recent[r] = next as u32;
+        self.keys.push(key);
+        positions.push(DVec3::new(
+            f64::from(p[0]),
+            f64::from(p[1]),
+            f64::from(p[2]),
+        ));
+        if self.keys.len() * 2 > self.slots.len() {
+            self.grow();
+        }
+        Some(next as u32)
+    }
+
+    fn grow(&mut self) {
+        let cap = self.slots.len() * 2;
+        let mask = cap - 1;
+        let mut slots = vec![EMPTY; cap];
+        for (v, k) in self.keys.iter().enumerate() {
+            let mut i = Self::hash(k) & mask;
+            while slots[i] != EMPTY {
+                i = (i + 1) & mask;
+            }
+            slots[i] = v as u32;
+        }
+        self.slots = slots;
+    }
+
+    fn note(&self, raw: &mut RawMesh) {
+        note_weld(self.corners, raw);
+    }
+}
+
+fn note_weld(corners: u64, raw: &mut RawMesh) {
+    let welded = corners.saturating_sub(raw.positions.len() as u64);
+    raw.notes.push(format!(
+        "welded {corners} STL triangle corners into {} vertices by exact position ({welded} merged)",
+        raw.positions.len()
+    ));
 }
 
 impl<K: std::hash::Hash + Eq> Welder<K> {
@@ -66,12 +171,7 @@ impl<K: std::hash::Hash + Eq> Welder<K> {
     }
 
     fn note(&self, raw: &mut RawMesh) {
-        let welded = self.corners.saturating_sub(raw.positions.len() as u64);
-        raw.notes.push(format!(
-            "welded {} STL triangle corners into {} vertices by exact position ({welded} merged)",
-            self.corners,
-            raw.positions.len()
-        ));
+        note_weld(self.corners, raw);
     }
 }
 
@@ -85,16 +185,6 @@ impl Welder<[u64; 3]> {
             (p.z + 0.0).to_bits(),
         ];
         self.vertex_with(key, p, positions)
-    }
-}
-
-impl Welder<Key32> {
-    /// The vertex at the (finite) `f32` position `p`.
-    fn vertex32(&mut self, p: [f32; 3], positions: &mut Vec<DVec3>) -> Option<u32> {
-        let [x, y, z] = p.map(|c| (c + 0.0).to_bits());
-        let key = Key32(u64::from(x) | u64::from(y) << 32, z);
-        let pos = DVec3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
-        self.vertex_with(key, pos, positions)
     }
 }
 
@@ -201,7 +291,7 @@ fn read_binary<R: Read>(
     // by data (a closed surface has about half as many vertices as triangles).
     raw.faces.reserve(n as usize);
     raw.positions.reserve(n as usize / 2 + 3);
-    let mut welder = Welder::<Key32>::new(n as usize / 2 + 3, caps.vertices());
+    let mut welder = Welder32::new(n as usize / 2 + 3, caps.vertices());
     let mut rec = [0u8; 50];
     let f = |rec: &[u8; 50], o: usize| -> f32 {
         match rec.get(o..o + 4) {

@@ -3,7 +3,7 @@
 //! orientation and non-manifold vertices. Nothing here panics on bad input; what was
 //! resolved is counted in [`BuildReport`].
 
-use super::{HalfedgeId, Mesh, Topology, VertexId};
+use super::{group_by_key, HalfedgeId, Mesh, Topology, VertexId};
 use crate::io::RawMesh;
 use serde::Serialize;
 
@@ -51,7 +51,6 @@ impl Mesh {
 
         // 1. drop faces that cannot be triangles
         let mut faces: Vec<[u32; 3]> = Vec::with_capacity(raw.faces.len());
-        let mut seen = std::collections::HashSet::with_capacity(raw.faces.len());
         for f in &raw.faces {
             if f.iter().any(|&i| i as usize >= nv) {
                 rep.out_of_range_faces += 1;
@@ -66,120 +65,160 @@ impl Mesh {
                 rep.zero_area_faces += 1;
                 continue;
             }
-            let mut key = *f;
-            key.sort_unstable();
-            if !seen.insert(key) {
-                rep.duplicate_faces += 1;
-                continue;
-            }
             faces.push(*f);
         }
-        drop(seen);
-        let nf = faces.len();
-
-        // 2. pair half-edges by undirected edge (sort, then group)
-        let mut keyed: Vec<(u64, u32)> = Vec::with_capacity(nf * 3);
-        for (fi, f) in faces.iter().enumerate() {
-            for c in 0..3 {
-                let (a, b) = (f[c], f[(c + 1) % 3]);
-                let key = ((a.min(b) as u64) << 32) | a.max(b) as u64;
-                keyed.push((key, (fi * 3 + c) as u32));
-            }
-        }
-        keyed.sort_unstable();
-        // candidate pairs (h1, h2), not yet checked for orientation
-        let mut pairs: Vec<(u32, u32)> = Vec::with_capacity(nf * 3 / 2);
-        let from = |faces: &Vec<[u32; 3]>, h: u32| faces[(h / 3) as usize][(h % 3) as usize];
-        let mut i = 0;
-        while i < keyed.len() {
-            let mut j = i + 1;
-            while j < keyed.len() && keyed[j].0 == keyed[i].0 {
-                j += 1;
-            }
-            let group = &keyed[i..j];
-            if group.len() == 2 {
-                pairs.push((group[0].1, group[1].1));
-            } else if group.len() > 2 {
-                rep.non_manifold_edges += 1;
-                // keep the first pair of opposite direction (else the first two)
-                let h0 = group[0].1;
-                let opp = group[1..]
-                    .iter()
-                    .find(|g| from(&faces, g.1) != from(&faces, h0))
-                    .map(|g| g.1)
-                    .unwrap_or(group[1].1);
-                pairs.push((h0, opp));
-            }
-            i = j;
-        }
-        drop(keyed);
-
-        // 3. orient: breadth-first over the pairs, flipping faces to agree
-        let mut adj_start = vec![0u32; nf + 1];
-        for &(a, b) in &pairs {
-            adj_start[(a / 3) as usize + 1] += 1;
-            adj_start[(b / 3) as usize + 1] += 1;
-        }
-        for k in 0..nf {
-            adj_start[k + 1] += adj_start[k];
-        }
-        let mut fill = adj_start.clone();
-        let mut adj = vec![0u32; adj_start[nf] as usize]; // pair index
-        for (pi, &(a, b)) in pairs.iter().enumerate() {
-            for h in [a, b] {
-                let f = (h / 3) as usize;
-                adj[fill[f] as usize] = pi as u32;
-                fill[f] += 1;
-            }
-        }
-        drop(fill);
-        let mut flip: Vec<Option<bool>> = vec![None; nf];
-        let mut cut = vec![false; pairs.len()];
-        let mut queue = std::collections::VecDeque::new();
-        let mut component: Vec<usize> = Vec::new();
-        for seed in 0..nf {
-            if flip[seed].is_some() {
-                continue;
-            }
-            flip[seed] = Some(false);
-            queue.push_back(seed);
-            component.clear();
-            while let Some(f) = queue.pop_front() {
-                component.push(f);
-                let ff = flip[f].unwrap_or(false);
-                for k in adj_start[f]..adj_start[f + 1] {
-                    let pi = adj[k as usize] as usize;
-                    if cut[pi] {
-                        continue;
-                    }
-                    let (a, b) = pairs[pi];
-                    let (mine, other) = if (a / 3) as usize == f {
-                        (a, b)
-                    } else {
-                        (b, a)
-                    };
-                    let g = (other / 3) as usize;
-                    let same_dir = from(&faces, mine) == from(&faces, other);
-                    // after flips the two must run in opposite directions
-                    let want = ff ^ same_dir;
-                    match flip[g] {
-                        None => {
-                            flip[g] = Some(want);
-                            queue.push_back(g);
-                        }
-                        Some(x) if x != want => {
-                            cut[pi] = true;
-                            rep.orientation_cuts += 1;
-                        }
-                        _ => {}
+        // duplicates (the same three vertices, any order): the first one is kept.
+        // Faces grouped by their smallest vertex (a counting sort, no hashing), then
+        // each group sorted by its vertex triple and face number.
+        let sorted = |f: [u32; 3]| {
+            let mut k = f;
+            k.sort_unstable();
+            k
+        };
+        let mut dup = vec![false; faces.len()];
+        {
+            let (off, mut group) = group_by_key(nv, faces.len(), |i| {
+                faces[i].iter().copied().min().unwrap_or(0) as usize
+            });
+            for v in 0..nv {
+                let g = &mut group[off[v] as usize..off[v + 1] as usize];
+                if g.len() < 2 {
+                    continue;
+                }
+                g.sort_unstable_by_key(|&i| (sorted(faces[i as usize]), i));
+                for w in g.windows(2) {
+                    if sorted(faces[w[0] as usize]) == sorted(faces[w[1] as usize]) {
+                        dup[w[1] as usize] = true;
                     }
                 }
             }
-            // keep the orientation most of the component already has
-            let flipped = component.iter().filter(|&&f| flip[f] == Some(true)).count();
-            if flipped * 2 > component.len() {
-                for &f in &component {
-                    flip[f] = flip[f].map(|x| !x);
+        }
+        rep.duplicate_faces = dup.iter().filter(|&&d| d).count();
+        if rep.duplicate_faces > 0 {
+            let mut k = 0;
+            faces.retain(|_| {
+                k += 1;
+                !dup[k - 1]
+            });
+        }
+        drop(dup);
+        faces.shrink_to_fit();
+        let nf = faces.len();
+
+        // 2. pair half-edges by undirected edge: half-edges grouped by their smaller
+        // vertex (a counting sort), each group sorted by the larger vertex and the
+        // half-edge number, so equal edges are adjacent in (edge, half-edge) order
+        let from = |faces: &Vec<[u32; 3]>, h: u32| faces[(h / 3) as usize][(h % 3) as usize];
+        let to =
+            |faces: &Vec<[u32; 3]>, h: u32| faces[(h / 3) as usize][((h % 3 + 1) % 3) as usize];
+        let (off, mut halfedges) = group_by_key(nv, nf * 3, |h| {
+            from(&faces, h as u32).min(to(&faces, h as u32)) as usize
+        });
+        // candidate pairs (h1, h2), not yet checked for orientation
+        let mut pairs: Vec<(u32, u32)> = Vec::with_capacity(nf * 3 / 2);
+        for v in 0..nv {
+            let g = &mut halfedges[off[v] as usize..off[v + 1] as usize];
+            g.sort_unstable_by_key(|&h| (from(&faces, h).max(to(&faces, h)), h));
+            let far = |h: u32| from(&faces, h).max(to(&faces, h));
+            let mut i = 0;
+            while i < g.len() {
+                let mut j = i + 1;
+                while j < g.len() && far(g[j]) == far(g[i]) {
+                    j += 1;
+                }
+                let group = &g[i..j];
+                if group.len() == 2 {
+                    pairs.push((group[0], group[1]));
+                } else if group.len() > 2 {
+                    rep.non_manifold_edges += 1;
+                    // keep the first pair of opposite direction (else the first two)
+                    let h0 = group[0];
+                    let opp = group[1..]
+                        .iter()
+                        .find(|&&g| from(&faces, g) != from(&faces, h0))
+                        .copied()
+                        .unwrap_or(group[1]);
+                    pairs.push((h0, opp));
+                }
+                i = j;
+            }
+        }
+        drop(halfedges);
+        drop(off);
+
+        // 3. orient: breadth-first over the pairs, flipping faces to agree. When every
+        // pair already runs in opposite directions (a consistently oriented input, the
+        // usual case) the search would flip nothing and cut nothing: skipped.
+        let consistent = pairs
+            .iter()
+            .all(|&(a, b)| from(&faces, a) != from(&faces, b));
+        let mut flip: Vec<Option<bool>> = vec![consistent.then_some(false); nf];
+        let mut cut = vec![false; pairs.len()];
+        if !consistent {
+            let mut adj_start = vec![0u32; nf + 1];
+            for &(a, b) in &pairs {
+                adj_start[(a / 3) as usize + 1] += 1;
+                adj_start[(b / 3) as usize + 1] += 1;
+            }
+            for k in 0..nf {
+                adj_start[k + 1] += adj_start[k];
+            }
+            let mut fill = adj_start.clone();
+            let mut adj = vec![0u32; adj_start[nf] as usize]; // pair index
+            for (pi, &(a, b)) in pairs.iter().enumerate() {
+                for h in [a, b] {
+                    let f = (h / 3) as usize;
+                    adj[fill[f] as usize] = pi as u32;
+                    fill[f] += 1;
+                }
+            }
+            drop(fill);
+            let mut queue = std::collections::VecDeque::new();
+            let mut component: Vec<usize> = Vec::new();
+            for seed in 0..nf {
+                if flip[seed].is_some() {
+                    continue;
+                }
+                flip[seed] = Some(false);
+                queue.push_back(seed);
+                component.clear();
+                while let Some(f) = queue.pop_front() {
+                    component.push(f);
+                    let ff = flip[f].unwrap_or(false);
+                    for k in adj_start[f]..adj_start[f + 1] {
+                        let pi = adj[k as usize] as usize;
+                        if cut[pi] {
+                            continue;
+                        }
+                        let (a, b) = pairs[pi];
+                        let (mine, other) = if (a / 3) as usize == f {
+                            (a, b)
+                        } else {
+                            (b, a)
+                        };
+                        let g = (other / 3) as usize;
+                        let same_dir = from(&faces, mine) == from(&faces, other);
+                        // after flips the two must run in opposite directions
+                        let want = ff ^ same_dir;
+                        match flip[g] {
+                            None => {
+                                flip[g] = Some(want);
+                                queue.push_back(g);
+                            }
+                            Some(x) if x != want => {
+                                cut[pi] = true;
+                                rep.orientation_cuts += 1;
+                            }
+                            _ => {}
+                        }
+                    }
+                }
+                // keep the orientation most of the component already has
+                let flipped = component.iter().filter(|&&f| flip[f] == Some(true)).count();
+                if flipped * 2 > component.len() {
+                    for &f in &component {
+                        flip[f] = flip[f].map(|x| !x);
+                    }
                 }
             }
         }

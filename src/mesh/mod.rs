@@ -265,13 +265,18 @@ impl Topology {
     }
 
     /// Checks every invariant; returns the first violation found.
+    ///
+    /// Linear time and memory (no hashing): the half-edges are grouped by their start
+    /// vertex with a counting sort, and each vertex's (short) list of end vertices is
+    /// sorted to find a repeated directed edge and to look up opposites.
     pub fn validate(&self) -> Result<(), String> {
         let nv = self.anchor.len();
         if self.twin.len() != self.faces.len() * 3 {
             return Err("twin array size".into());
         }
-        let mut corners = vec![0u32; nv];
-        let mut directed = std::collections::HashSet::with_capacity(self.twin.len());
+        if self.twin.len() > u32::MAX as usize {
+            return Err("more half-edges than 32-bit indices can hold".into());
+        }
         for (fi, f) in self.faces.iter().enumerate() {
             for c in 0..3 {
                 if f[c].idx() >= nv {
@@ -280,16 +285,27 @@ impl Topology {
                 if f[c] == f[(c + 1) % 3] {
                     return Err(format!("face {fi} repeats vertex {}", f[c]));
                 }
-                corners[f[c].idx()] += 1;
-                if !directed.insert((f[c], f[(c + 1) % 3])) {
-                    return Err(format!(
-                        "directed edge {}->{} used twice",
-                        f[c],
-                        f[(c + 1) % 3]
-                    ));
-                }
             }
         }
+        // the end vertices of the half-edges leaving each vertex, sorted
+        let (off, mut ends) = group_by_key(nv, self.twin.len(), |h| {
+            self.from(HalfedgeId::from_idx(h)).idx()
+        });
+        for e in ends.iter_mut() {
+            *e = self.to(HalfedgeId(*e)).0;
+        }
+        for v in 0..nv {
+            let (a, b) = (off[v] as usize, off[v + 1] as usize);
+            let list = &mut ends[a..b];
+            list.sort_unstable();
+            if let Some(w) = list.windows(2).find(|w| w[0] == w[1]) {
+                return Err(format!("directed edge {v}->{} used twice", w[0]));
+            }
+        }
+        let ends_of = |v: usize| -> &[u32] {
+            ends.get(off[v] as usize..off[v + 1] as usize)
+                .unwrap_or(&[])
+        };
         for (i, t) in self.twin.iter().enumerate() {
             let h = HalfedgeId::from_idx(i);
             if let Some(t) = *t {
@@ -299,7 +315,10 @@ impl Topology {
                 if self.from(t) != self.to(h) || self.to(t) != self.from(h) {
                     return Err(format!("half-edge {i} and its twin do not share endpoints"));
                 }
-            } else if directed.contains(&(self.to(h), self.from(h))) {
+            } else if ends_of(self.to(h).idx())
+                .binary_search(&self.from(h).0)
+                .is_ok()
+            {
                 return Err(format!(
                     "boundary half-edge {i} ({}->{}) has an unlinked opposite",
                     self.from(h),
@@ -307,7 +326,9 @@ impl Topology {
                 ));
             }
         }
-        for (vi, &count) in corners.iter().enumerate() {
+        let corners = |v: usize| off[v + 1] - off[v];
+        for vi in 0..nv {
+            let count = corners(vi);
             let v = VertexId::from_idx(vi);
             match self.anchor[vi] {
                 None if count > 0 => return Err(format!("vertex {vi} has faces but no anchor")),
@@ -327,6 +348,32 @@ impl Topology {
         }
         Ok(())
     }
+}
+
+/// A counting sort: the items `0..m` grouped by `key(item)` (each `< n`), each group
+/// in item order. Returns the group offsets (`n + 1` of them: group `k` is
+/// `items[off[k]..off[k + 1]]`) and the items. Linear time, no hashing; `m` must fit
+/// in `u32`.
+pub(crate) fn group_by_key(
+    n: usize,
+    m: usize,
+    key: impl Fn(usize) -> usize,
+) -> (Vec<u32>, Vec<u32>) {
+    let mut off = vec![0u32; n + 1];
+    for i in 0..m {
+        off[key(i) + 1] += 1;
+    }
+    for k in 0..n {
+        off[k + 1] += off[k];
+    }
+    let mut cursor: Vec<u32> = off[..n].to_vec();
+    let mut items = vec![0u32; m];
+    for i in 0..m {
+        let c = &mut cursor[key(i)];
+        items[*c as usize] = i as u32;
+        *c += 1;
+    }
+    (off, items)
 }
 
 /// Iterator over the outgoing half-edges of a vertex.

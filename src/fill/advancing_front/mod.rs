@@ -403,12 +403,30 @@ impl<'a> Builder<'a> {
         let (lo, hi) = (lo - DVec3::splat(margin), hi + DVec3::splat(margin));
         let mut obstacles = Obstacles::new(2.0 * cell);
         let mut mesh_tris = Vec::new();
-        for f in 0..mesh.num_faces() {
-            let t = mesh.tri(crate::mesh::FaceId::from_idx(f));
-            let (tl, th) = intersect::tri_box(&t);
-            if tl.cmpgt(hi).any() || th.cmplt(lo).any() || !tl.is_finite() || !th.is_finite() {
+        // A triangle's box misses [lo, hi] when on some axis all three corners lie
+        // beyond the same side: the per-vertex outcodes (one bit per side and axis)
+        // then share a bit. One pass over the vertices and one over the faces'
+        // indices, instead of loading every triangle's corners (10M-face scans).
+        let outcode: Vec<u8> = mesh
+            .positions
+            .iter()
+            .map(|q| {
+                let below = q.cmplt(lo).bitmask() as u8;
+                let above = q.cmpgt(hi).bitmask() as u8;
+                // a non-finite corner gives a non-finite box: skipped as before
+                if q.is_finite() {
+                    below | above << 3
+                } else {
+                    0x40
+                }
+            })
+            .collect();
+        for (f, fv) in mesh.topo.faces().iter().enumerate() {
+            let codes = fv.map(|v| outcode.get(v.idx()).copied().unwrap_or(0x40));
+            if codes[0] & codes[1] & codes[2] != 0 || (codes[0] | codes[1] | codes[2]) & 0x40 != 0 {
                 continue;
             }
+            let t = mesh.tri(crate::mesh::FaceId::from_idx(f));
             obstacles.add(t);
             mesh_tris.push(t);
         }
