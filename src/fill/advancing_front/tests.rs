@@ -431,7 +431,9 @@ fn dispatcher_fills_a_large_hole_with_the_front() {
     use crate::policy::Method;
     use crate::report::HoleStatus;
     let (mut mesh, lp) = grid_with_hole(30, |c| (c - DVec3::new(15.0, 15.0, 0.0)).length() < 9.0);
-    let policy = Policy::default();
+    // paper 002's list for large holes (the default puts wavefront first)
+    let mut policy = Policy::default();
+    policy.dispatch.large = vec![Method::AdvancingFront, Method::MinAreaFair];
     let hole = Hole::new(0, &mesh, lp, &policy);
     let mut checker = Checker::new(&mesh);
     let rep = crate::fill::fill_hole(&mut mesh, &hole, &policy, &mut checker);
