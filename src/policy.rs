@@ -425,12 +425,17 @@ impl Default for Checks {
 pub struct Limits {
     /// Per method attempt on one hole, in milliseconds; past it the next method is tried.
     pub hole_time_ms: u64,
+    /// Largest patch (triangles) a method builds for one hole (0: no limit):
+    /// min_area_fair coarsens its density to stay under it, advancing_front gives up
+    /// when its estimate or its patch exceeds it.
+    pub max_patch_triangles: usize,
 }
 
 impl Default for Limits {
     fn default() -> Self {
         Limits {
             hole_time_ms: 10_000,
+            max_patch_triangles: 50_000,
         }
     }
 }
@@ -632,7 +637,7 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
         ],
     ),
     ("checks", &["self_intersection", "min_angle_deg"]),
-    ("limits", &["hole_time_ms"]),
+    ("limits", &["hole_time_ms", "max_patch_triangles"]),
     (
         "smooth",
         &[
@@ -662,6 +667,10 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
 pub const MAX_POLICY_BYTES: u64 = 1 << 20;
 /// Largest `refine.restricted_search_above`: the full search takes O(k^2) memory.
 pub const MAX_FULL_SEARCH: usize = 2000;
+/// Smallest and largest `limits.max_patch_triangles` (besides 0).
+pub const MIN_PATCH_TRIANGLES: usize = 100;
+pub const MAX_PATCH_TRIANGLES: usize = 100_000_000;
+
 /// Largest `limits.hole_time_ms` (one day).
 pub const MAX_HOLE_TIME_MS: u64 = 86_400_000;
 /// Largest `smooth.iterations` (and `hpde.num_smooth`).
@@ -993,6 +1002,16 @@ impl Policy {
                 "limits.hole_time_ms",
                 format!(
                     "must be 0 (no limit) or between 1 and {MAX_HOLE_TIME_MS} (one day) (got {ms})"
+                ),
+            ));
+        }
+
+        let mt = self.limits.max_patch_triangles;
+        if mt != 0 && !(MIN_PATCH_TRIANGLES..=MAX_PATCH_TRIANGLES).contains(&mt) {
+            return Err(Invalid::new(
+                "limits.max_patch_triangles",
+                format!(
+                    "must be 0 (no limit) or between {MIN_PATCH_TRIANGLES} and {MAX_PATCH_TRIANGLES} (got {mt})"
                 ),
             ));
         }
@@ -1355,6 +1374,9 @@ impl Reader<'_> {
             ("checks", "self_intersection") => p.checks.self_intersection = self.boolean(key, v)?,
             ("checks", "min_angle_deg") => p.checks.min_angle_deg = self.float(key, v)?,
             ("limits", "hole_time_ms") => p.limits.hole_time_ms = self.uint(key, v)?,
+            ("limits", "max_patch_triangles") => {
+                p.limits.max_patch_triangles = self.usize(key, v)?
+            }
             ("smooth", "enabled") => p.smooth.enabled = self.boolean(key, v)?,
             ("smooth", "iterations") => p.smooth.iterations = self.usize(key, v)?,
             ("smooth", "lambda") => p.smooth.lambda = self.float(key, v)?,
@@ -1647,7 +1669,10 @@ mod tests {
     fn unknown_key_without_close_match_lists_or_places_it() {
         let e = err("[limits]\nbananas = 3\n");
         assert_eq!(e.line, Some(2));
-        assert_eq!(e.message, "unknown key; [limits] has `hole_time_ms`");
+        assert_eq!(
+            e.message,
+            "unknown key; [limits] has `hole_time_ms`, `max_patch_triangles`"
+        );
         let e = err("[front]\nonly_longest = true\n");
         assert_eq!(
             e.message,
@@ -2034,7 +2059,7 @@ mod tests {
                 wavefront: Wavefront::default(),
                 hpde,
                 checks: Checks { self_intersection, min_angle_deg },
-                limits: Limits { hole_time_ms },
+                limits: Limits { hole_time_ms, max_patch_triangles: 50_000 },
                 smooth: Smooth {
                     enabled, iterations, lambda: lm.0, mu: lm.1, weights: smooth_weights, scope, rings, boundary,
                 },
