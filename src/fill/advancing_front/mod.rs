@@ -69,7 +69,12 @@
 //!   from the hole instead of closing, as on a sphere with more than a hemisphere
 //!   missing). Note that the steps a hole needs grow with its area: a round planar
 //!   hole needs about `k²/8` steps, so the default 200 steps per vertex limits round
-//!   holes to about 1,600 boundary vertices.
+//!   holes to about 1,600 boundary vertices. Before any step, the patch size is
+//!   estimated from the loop's projected (vector) area over `0.25 l²` (`l` the loop's
+//!   mean incident mesh edge length; measured on slots and caps); past
+//!   `limits.max_patch_triangles` the method gives up at once, and it also gives up
+//!   as soon as its patch passes that limit (not in the paper; it keeps a round hole of
+//!   thousands of vertices from spending its whole time limit before failing over).
 //!
 //! After closing: an angle-improving edge-swap pass (max-min angle, never onto an
 //! existing edge, never folding a pair), then with `front.fair` the new vertices are
