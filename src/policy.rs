@@ -430,6 +430,10 @@ pub struct Limits {
     /// Threads that fill independent holes at once (0: one per core). The output
     /// does not depend on it.
     pub threads: usize,
+    /// Largest patch (triangles) a method builds for one hole (0: no limit):
+    /// min_area_fair coarsens its density to stay under it, advancing_front gives up
+    /// when its estimate or its patch exceeds it.
+    pub max_patch_triangles: usize,
 }
 
 impl Default for Limits {
@@ -437,6 +441,7 @@ impl Default for Limits {
         Limits {
             hole_time_ms: 10_000,
             threads: 0,
+            max_patch_triangles: 50_000,
         }
     }
 }
@@ -638,7 +643,7 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
         ],
     ),
     ("checks", &["self_intersection", "min_angle_deg"]),
-    ("limits", &["hole_time_ms", "threads"]),
+    ("limits", &["hole_time_ms", "threads", "max_patch_triangles"]),
     (
         "smooth",
         &[
@@ -670,6 +675,9 @@ pub const MAX_POLICY_BYTES: u64 = 1 << 20;
 pub const MAX_FULL_SEARCH: usize = 2000;
 /// Largest `limits.threads`.
 pub const MAX_THREADS: usize = 1024;
+/// Smallest and largest `limits.max_patch_triangles` (besides 0).
+pub const MIN_PATCH_TRIANGLES: usize = 100;
+pub const MAX_PATCH_TRIANGLES: usize = 100_000_000;
 
 /// Largest `limits.hole_time_ms` (one day).
 pub const MAX_HOLE_TIME_MS: u64 = 86_400_000;
@@ -1010,6 +1018,16 @@ impl Policy {
             return Err(Invalid::new(
                 "limits.threads",
                 format!("must be 0 (one per core) or between 1 and {MAX_THREADS} (got {threads})"),
+            ));
+        }
+
+        let mt = self.limits.max_patch_triangles;
+        if mt != 0 && !(MIN_PATCH_TRIANGLES..=MAX_PATCH_TRIANGLES).contains(&mt) {
+            return Err(Invalid::new(
+                "limits.max_patch_triangles",
+                format!(
+                    "must be 0 (no limit) or between {MIN_PATCH_TRIANGLES} and {MAX_PATCH_TRIANGLES} (got {mt})"
+                ),
             ));
         }
 
@@ -1372,6 +1390,9 @@ impl Reader<'_> {
             ("checks", "min_angle_deg") => p.checks.min_angle_deg = self.float(key, v)?,
             ("limits", "hole_time_ms") => p.limits.hole_time_ms = self.uint(key, v)?,
             ("limits", "threads") => p.limits.threads = self.usize(key, v)?,
+            ("limits", "max_patch_triangles") => {
+                p.limits.max_patch_triangles = self.usize(key, v)?
+            }
             ("smooth", "enabled") => p.smooth.enabled = self.boolean(key, v)?,
             ("smooth", "iterations") => p.smooth.iterations = self.usize(key, v)?,
             ("smooth", "lambda") => p.smooth.lambda = self.float(key, v)?,
@@ -1666,7 +1687,7 @@ mod tests {
         assert_eq!(e.line, Some(2));
         assert_eq!(
             e.message,
-            "unknown key; [limits] has `hole_time_ms`, `threads`"
+            "unknown key; [limits] has `hole_time_ms`, `threads`, `max_patch_triangles`"
         );
         let e = err("[front]\nonly_longest = true\n");
         assert_eq!(

@@ -79,6 +79,19 @@ pub fn newell_normal(pts: &[DVec3]) -> DVec3 {
     n.normalize_or_zero()
 }
 
+/// Area of a closed polygon projected on its best-fit plane: half the length of its
+/// vector area `Σ (p_i - c) × (p_{i+1} - c)`. A lower bound of the area of any
+/// surface the polygon bounds (equal for a planar polygon).
+pub fn vector_area(pts: &[DVec3]) -> f64 {
+    let c = centroid(pts);
+    let k = pts.len();
+    let mut n = DVec3::ZERO;
+    for i in 0..k {
+        n += (pts[i] - c).cross(pts[(i + 1) % k] - c);
+    }
+    0.5 * n.length()
+}
+
 /// Centroid of points.
 pub fn centroid(pts: &[DVec3]) -> DVec3 {
     if pts.is_empty() {
@@ -99,6 +112,23 @@ mod tests {
         assert!((quality(a, b, c) - 3f64.sqrt()).abs() < 1e-12);
         let s: f64 = angles(a, b, c).iter().sum();
         assert!((s - std::f64::consts::PI).abs() < 1e-12);
+    }
+
+    #[test]
+    fn vector_area_of_a_square_and_a_bent_loop() {
+        let sq = [DVec3::ZERO, DVec3::X, DVec3::X + DVec3::Y, DVec3::Y];
+        assert!((vector_area(&sq) - 1.0).abs() < 1e-12);
+        // a loop folded at a right angle: the projection is smaller than the surface
+        let bent = [
+            DVec3::ZERO,
+            DVec3::X,
+            DVec3::new(1.0, 1.0, 0.0),
+            DVec3::new(1.0, 1.0, 1.0),
+            DVec3::new(0.0, 1.0, 1.0),
+            DVec3::Y,
+        ];
+        let a = vector_area(&bent);
+        assert!(a > 1.0 && a < 2.0, "{a}");
     }
 
     #[test]

@@ -69,7 +69,12 @@
 //!   from the hole instead of closing, as on a sphere with more than a hemisphere
 //!   missing). Note that the steps a hole needs grow with its area: a round planar
 //!   hole needs about `k²/8` steps, so the default 200 steps per vertex limits round
-//!   holes to about 1,600 boundary vertices.
+//!   holes to about 1,600 boundary vertices. Before any step, the patch size is
+//!   estimated from the loop's projected (vector) area over `0.25 l²` (`l` the loop's
+//!   mean incident mesh edge length; measured on slots and caps); past
+//!   `limits.max_patch_triangles` the method gives up at once, and it also gives up
+//!   as soon as its patch passes that limit (not in the paper; it keeps a round hole of
+//!   thousands of vertices from spending its whole time limit before failing over).
 //!
 //! After closing: an angle-improving edge-swap pass (max-min angle, never onto an
 //! existing edge, never folding a pair), then with `front.fair` the new vertices are
@@ -132,6 +137,17 @@ pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
     }
     let params = Params::from_policy(ctx)?;
     let t0 = std::time::Instant::now();
+    let cap = ctx.policy.limits.max_patch_triangles;
+    if cap > 0 {
+        // give up at once on a hole whose patch would pass the cap (a round hole of
+        // thousands of vertices): the front would take minutes and fail anyway
+        let est = estimated_triangles(ctx);
+        if est > cap as f64 {
+            return failed(format!(
+                "the patch would have about {est:.0} triangles > limits.max_patch_triangles = {cap}"
+            ));
+        }
+    }
     let mut b = Builder::new(ctx, params)?;
     let t1 = std::time::Instant::now();
     b.run()?;
@@ -150,6 +166,36 @@ pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
         "advancing front closed"
     );
     Ok(patch)
+}
+
+/// Mean area of a front triangle in units of the squared mean incident edge length of
+/// the loop (measured on a 10,008-vertex cylinder slot: 0.26, on a 217-vertex sphere
+/// cap: 0.25; the front's steps are shorter than the size field).
+const AREA_PER_TRIANGLE: f64 = 0.25;
+
+/// The number of triangles the front would make: the loop's projected area
+/// ([`geom::vector_area`], a lower bound of the patch's area) over the area of a
+/// front triangle at the loop's mean incident edge length.
+fn estimated_triangles(ctx: &FillContext) -> f64 {
+    let pts = ctx.boundary_positions();
+    let area = geom::vector_area(&pts);
+    let (mut sum, mut n) = (0.0, 0usize);
+    for &v in &ctx.hole.vertices {
+        let m = ctx.mesh.mean_incident_edge_length(v);
+        if m > 0.0 && m.is_finite() {
+            sum += m;
+            n += 1;
+        }
+    }
+    let s = if n > 0 {
+        sum / n as f64
+    } else {
+        ctx.hole.mean_edge_length
+    };
+    if !(s > 0.0 && area.is_finite()) {
+        return 0.0;
+    }
+    area / (AREA_PER_TRIANGLE * s * s)
 }
 
 /// Validated parameters (angles in radians).
@@ -1162,6 +1208,13 @@ impl<'a> Builder<'a> {
                 ));
             }
             self.steps += 1;
+            let cap = self.ctx.policy.limits.max_patch_triangles;
+            if cap > 0 && self.tris.len() > cap {
+                return failed(format!(
+                    "the patch passed limits.max_patch_triangles = {cap} triangles with {} front vertices left",
+                    self.alive
+                ));
+            }
             if self.steps > self.p.max_steps {
                 return failed(format!(
                     "front did not close after {} steps ({} taken, {} set aside; {} triangles, {} front vertices left)",

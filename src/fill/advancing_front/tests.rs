@@ -942,3 +942,33 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn gives_up_at_once_past_the_patch_size_limit() {
+    // a cap of 1 radian cut from a level-4 sphere: filled under the default limit
+    let (mesh, lp) = sphere_with_hole(4, 1.0);
+    let mut policy = Policy::default();
+    let (_, r) = run(&mesh, &lp, &policy);
+    assert!(r.is_ok(), "{r:?}");
+    // with a limit of 100 triangles the estimate alone refuses it
+    policy.limits.max_patch_triangles = 100;
+    let t = std::time::Instant::now();
+    let (_, r) = run(&mesh, &lp, &policy);
+    match r {
+        Err(FillError::Failed(why)) => assert!(why.contains("max_patch_triangles"), "{why}"),
+        other => panic!("expected a failure, got {other:?}"),
+    }
+    assert!(t.elapsed().as_secs_f64() < 1.0);
+    // just above the estimate the front starts, then stops at the limit
+    let est = super::estimated_triangles(&FillContext {
+        mesh: &mesh,
+        hole: &Hole::new(0, &mesh, lp.clone(), &policy),
+        policy: &policy,
+        deadline: Deadline::none(),
+    });
+    policy.limits.max_patch_triangles = (est as usize + 1).max(100);
+    let (_, r) = run(&mesh, &lp, &policy);
+    if let Ok(p) = &r {
+        assert!(p.triangles.len() <= policy.limits.max_patch_triangles + 8);
+    }
+}

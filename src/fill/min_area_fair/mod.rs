@@ -99,6 +99,54 @@ pub fn loop_scales(mesh: &Mesh, lp: &[VertexId], fallback: f64) -> Vec<f64> {
         .collect()
 }
 
+/// Mean area of a refined triangle, in units of the squared scale, at density sqrt 2
+/// (measured: 0.67 on a cylinder slot refined to the loop's scale; 0.4 on a round
+/// 10,000-vertex hole refined to a floor, where the band along the loop keeps the
+/// loop's spacing; the smaller value errs toward coarsening).
+const AREA_PER_TRIANGLE: f64 = 0.4;
+
+/// Patches with more triangles than this after refinement get [`RELAX_FLAT_BIG`]
+/// relaxation rounds and no second pass: each round costs about as much as the
+/// refinement, and the dispatcher's tangential relaxation evens the triangles out too.
+const BIG_PATCH: usize = 20_000;
+const RELAX_FLAT_BIG: usize = 2;
+
+/// The scale floor that keeps the refined patch of a huge hole under `cap` triangles
+/// (`limits.max_patch_triangles`), or `None` when the surrounding density fits.
+///
+/// The patch's area is that of the initial (minimum-area) triangulation; refined to
+/// the density of the surrounding mesh (mean loop scale `s`) it would have about
+/// `A / (0.6 s²)` triangles (scaled by `(√2 / density)²`). Beyond the cap, new vertices
+/// get at least the scale `s·√(n / n_target)` with `n_target = 0.8 cap` (the band of
+/// triangles along the loop, which keeps the loop's spacing, takes the rest). Not in
+/// the paper, whose holes are small.
+pub fn coarse_scale(
+    pts: &[DVec3],
+    tris: &[[u32; 3]],
+    scale: &[f64],
+    density: f64,
+    cap: usize,
+) -> Option<f64> {
+    if cap == 0 || scale.is_empty() || density.is_nan() || density <= 0.0 {
+        return None;
+    }
+    let area: f64 = tris
+        .iter()
+        .map(|t| super::geom::tri_area(pts[t[0] as usize], pts[t[1] as usize], pts[t[2] as usize]))
+        .sum();
+    let s = scale.iter().sum::<f64>() / scale.len() as f64;
+    if !(area.is_finite() && s > 0.0 && s.is_finite()) {
+        return None;
+    }
+    let d = density / std::f64::consts::SQRT_2;
+    let n = area * d * d / (AREA_PER_TRIANGLE * s * s);
+    let target = 0.8 * cap as f64;
+    if n <= target {
+        return None;
+    }
+    Some(s * (n / target).sqrt())
+}
+
 /// Relaxation rounds on the refined (flat) patch before fairing.
 const RELAX_FLAT: usize = 8;
 /// Relaxation rounds on the faired patch before the second fairing.
@@ -129,30 +177,52 @@ pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
         restricted_above: ctx.policy.refine.restricted_search_above,
         deadline: ctx.deadline,
     };
+    let t0 = std::time::Instant::now();
     let tris = triangulate::triangulate(&input)?;
+    let t_tri = t0.elapsed();
     let scale = loop_scales(ctx.mesh, &ctx.hole.vertices, ctx.hole.mean_edge_length);
+    let cap = ctx.policy.limits.max_patch_triangles;
+    let floor = coarse_scale(&pts, &tris, &scale, ctx.policy.refine.density, cap);
     let mut r = refine::Refiner::new(pts, scale, tris, &forbidden);
+    if let Some(f) = floor {
+        r.scale_floor = f;
+        tracing::debug!(
+            hole = ctx.hole.id,
+            k,
+            floor = f,
+            "min_area_fair: coarser density"
+        );
+    }
+    if cap > 0 {
+        r.max_triangles = r.max_triangles.min(cap.saturating_mul(2).max(k * 4));
+    }
     r.refine(ctx.policy.refine.density, &ctx.deadline)?;
+    let t_refine = t0.elapsed();
     let refined = ctx.policy.refine.density > 0.0;
+    let big = r.tris.len() > BIG_PATCH;
+    let relax_faired = if big { 0 } else { RELAX_FAIRED };
     if refined {
         let extra = if ctx.policy.fair.continuity == 0 {
-            RELAX_FAIRED
+            relax_faired
         } else {
             0
         };
-        r.relax(RELAX_FLAT + extra, &ctx.deadline)?;
+        let flat = if big { RELAX_FLAT_BIG } else { RELAX_FLAT };
+        r.relax(flat + extra, &ctx.deadline)?;
     }
+    let t_relax = t0.elapsed();
     let mut patch = Patch {
         new_vertices: r.pos[k..].to_vec(),
         triangles: r.tris.clone(),
     };
     ctx.deadline.check()?;
     fair::fair_patch(ctx.mesh, ctx.hole, &mut patch, &ctx.policy.fair)?;
-    if refined && ctx.policy.fair.continuity > 0 && RELAX_FAIRED > 0 {
+    let t_fair = t0.elapsed();
+    if refined && ctx.policy.fair.continuity > 0 && relax_faired > 0 {
         // second pass on the faired surface: even out, swap, fair again
         r.pos.truncate(k);
         r.pos.extend_from_slice(&patch.new_vertices);
-        r.relax(RELAX_FAIRED, &ctx.deadline)?;
+        r.relax(relax_faired, &ctx.deadline)?;
         patch.new_vertices = r.pos[k..].to_vec();
         patch.triangles = r.tris.clone();
         fair::fair_patch(ctx.mesh, ctx.hole, &mut patch, &ctx.policy.fair)?;
@@ -168,6 +238,17 @@ pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
             patch.triangles = r.tris.clone();
         }
     }
+    tracing::debug!(
+        hole = ctx.hole.id,
+        k,
+        triangles = patch.triangles.len(),
+        triangulate_ms = t_tri.as_secs_f64() * 1e3,
+        refine_ms = (t_refine - t_tri).as_secs_f64() * 1e3,
+        relax_ms = (t_relax - t_refine).as_secs_f64() * 1e3,
+        fair_ms = (t_fair - t_relax).as_secs_f64() * 1e3,
+        second_pass_ms = (t0.elapsed() - t_fair).as_secs_f64() * 1e3,
+        "min_area_fair done"
+    );
     Ok(patch)
 }
 

@@ -71,6 +71,11 @@ pub struct Refiner<'a> {
     pub valence: bool,
     /// Relaxation splits interior edges longer than this times the local scale (0: off).
     pub split_ratio: f64,
+    /// Smallest scale a new vertex gets (0: none): coarsens the refinement of huge
+    /// holes (see `limits.max_patch_triangles`).
+    pub scale_floor: f64,
+    /// Refinement fails past this many triangles.
+    pub max_triangles: usize,
 }
 
 /// Smallest angle (degrees) that relaxation, valence flips and long-edge splits may
@@ -92,6 +97,11 @@ fn min_angle(a: DVec3, b: DVec3, c: DVec3) -> f64 {
     ((m + g - s) / (2.0 * (m * g).sqrt()))
         .clamp(-1.0, 1.0)
         .acos()
+}
+
+/// Twice the area of a triangle.
+fn tri_area2(a: DVec3, b: DVec3, c: DVec3) -> f64 {
+    (b - a).cross(c - a).length()
 }
 
 /// Hard cap on the refined patch size (a guard against absurd scales).
@@ -122,6 +132,8 @@ impl<'a> Refiner<'a> {
             forbidden,
             valence: true,
             split_ratio: 1.6,
+            scale_floor: 0.0,
+            max_triangles: MAX_TRIANGLES,
         }
     }
 
@@ -137,7 +149,14 @@ impl<'a> Refiner<'a> {
             if split == 0 {
                 break;
             }
-            self.delaunay_swaps(deadline)?;
+            let flips = self.delaunay_swaps(deadline)?;
+            tracing::trace!(
+                round = rounds,
+                split,
+                flips,
+                triangles = self.tris.len(),
+                "refine round"
+            );
             rounds += 1;
             if rounds > 200 {
                 break;
@@ -156,8 +175,9 @@ impl<'a> Refiner<'a> {
             let [a, b, c] = self.tris[t];
             let [pa, pb, pc] = [a, b, c].map(|i| self.pos[i as usize]);
             let cen = (pa + pb + pc) / 3.0;
-            let sc =
-                (self.scale[a as usize] + self.scale[b as usize] + self.scale[c as usize]) / 3.0;
+            let sc = ((self.scale[a as usize] + self.scale[b as usize] + self.scale[c as usize])
+                / 3.0)
+                .max(self.scale_floor);
             let ok = [a, b, c].iter().all(|&v| {
                 let d = density * (cen - self.pos[v as usize]).length();
                 d > sc && d > self.scale[v as usize]
@@ -165,9 +185,37 @@ impl<'a> Refiner<'a> {
             if !ok {
                 continue;
             }
-            if self.tris.len() + 2 > MAX_TRIANGLES {
+            // with a coarser density, a triangle on a loop edge is split only when its
+            // height over that edge exceeds the scale: its centroid would otherwise
+            // start a row of vertices at the loop's spacing, and the split cascade
+            // would refine the whole band along the loop to the density the floor is
+            // there to avoid. Its apex angle stays near loop spacing / scale. Other
+            // thin triangles are not split either.
+            if self.scale_floor > 0.0 {
+                let k = self.k as u32;
+                let on_loop =
+                    |x: u32, y: u32| x < k && y < k && ((x + 1) % k == y || (y + 1) % k == x);
+                let base = [(pa, pb, a, b), (pb, pc, b, c), (pc, pa, c, a)]
+                    .into_iter()
+                    .filter(|e| on_loop(e.2, e.3))
+                    .map(|e| (e.1 - e.0).length())
+                    .fold(0.0f64, f64::max);
+                let a2 = tri_area2(pa, pb, pc);
+                let thin = if base > 0.0 {
+                    a2 / base < sc
+                } else {
+                    // elsewhere a thin triangle would start the same cascade (an
+                    // equilateral one that passes the test above has area >= 0.65 sc²)
+                    a2 < 2.0 * 0.3 * sc * sc
+                };
+                if thin {
+                    continue;
+                }
+            }
+            if self.tris.len() + 2 > self.max_triangles {
                 return Err(FillError::Failed(format!(
-                    "refinement would exceed {MAX_TRIANGLES} triangles"
+                    "refinement would exceed {} triangles",
+                    self.max_triangles
                 )));
             }
             let nv = self.pos.len() as u32;
@@ -407,9 +455,10 @@ impl<'a> Refiner<'a> {
             if (pb - pa).length() <= ratio * target {
                 continue;
             }
-            if self.tris.len() + 2 > MAX_TRIANGLES {
+            if self.tris.len() + 2 > self.max_triangles {
                 return Err(FillError::Failed(format!(
-                    "refinement would exceed {MAX_TRIANGLES} triangles"
+                    "refinement would exceed {} triangles",
+                    self.max_triangles
                 )));
             }
             let c = Self::third(self.tris[t1 as usize], a, b);

@@ -414,3 +414,21 @@ fn voronoi_normalisation_beats_the_raw_cotangent_operator_on_the_sphere() {
         assert!(vor < raw / 2.0, "voronoi {vor} raw {raw}");
     }
 }
+
+#[test]
+fn coarse_scale_keeps_huge_patches_under_the_cap() {
+    // a planar unit square fanned from one corner, scale 0.01: about 25,000 triangles
+    // at density sqrt 2 (area 1 / (0.4 * 0.01²))
+    let pts = vec![DVec3::ZERO, DVec3::X, DVec3::new(1.0, 1.0, 0.0), DVec3::Y];
+    let tris = vec![[0, 1, 2], [0, 2, 3]];
+    let scale = vec![0.01; 4];
+    let d = std::f64::consts::SQRT_2;
+    assert_eq!(super::coarse_scale(&pts, &tris, &scale, d, 0), None);
+    assert_eq!(super::coarse_scale(&pts, &tris, &scale, d, 100_000), None);
+    let f = super::coarse_scale(&pts, &tris, &scale, d, 10_000).expect("coarser");
+    // n / (0.8 cap) = 25,000 / 8,000: the scale grows by its square root
+    assert!(
+        (f - 0.01 * (25_000.0f64 / 8_000.0).sqrt()).abs() < 1e-9,
+        "{f}"
+    );
+}

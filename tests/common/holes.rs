@@ -1,0 +1,511 @@
+//! Meshes with one hard or huge hole each, generated analytically (no data files):
+//! shared by the integration test `tests/hard_holes.rs` and the bench binary
+//! `examples/hole_bench.rs` (included there with `#[path]`).
+//!
+//! Every generator returns a closed-except-for-the-hole, consistently oriented,
+//! edge-manifold soup whose boundary is the loops listed in its doc (checked by
+//! [`boundary_loop_sizes`]).
+#![allow(dead_code)]
+
+use std::collections::HashMap;
+use std::f64::consts::TAU;
+
+pub type V3 = [f64; 3];
+
+/// A triangle soup.
+#[derive(Clone, Debug, Default)]
+pub struct Soup {
+    pub v: Vec<V3>,
+    pub f: Vec<[usize; 3]>,
+}
+
+impl Soup {
+    /// OBJ text (shortest round-trip decimal coordinates).
+    pub fn obj_text(&self) -> String {
+        let mut t = String::with_capacity(self.v.len() * 40 + self.f.len() * 24);
+        for p in &self.v {
+            t.push_str(&format!("v {} {} {}\n", p[0], p[1], p[2]));
+        }
+        for f in &self.f {
+            t.push_str(&format!("f {} {} {}\n", f[0] + 1, f[1] + 1, f[2] + 1));
+        }
+        t
+    }
+
+    /// Drops faces for which `remove` holds (given the face's centroid and the face),
+    /// then the unused vertices.
+    pub fn remove_faces(&self, remove: impl Fn(V3, [usize; 3]) -> bool) -> Soup {
+        let keep: Vec<[usize; 3]> = self
+            .f
+            .iter()
+            .copied()
+            .filter(|f| {
+                let c =
+                    [0, 1, 2].map(|k| (self.v[f[0]][k] + self.v[f[1]][k] + self.v[f[2]][k]) / 3.0);
+                !remove(c, *f)
+            })
+            .collect();
+        let mut map = vec![usize::MAX; self.v.len()];
+        let mut out = Soup::default();
+        for t in &keep {
+            let mut nt = [0; 3];
+            for k in 0..3 {
+                if map[t[k]] == usize::MAX {
+                    map[t[k]] = out.v.len();
+                    out.v.push(self.v[t[k]]);
+                }
+                nt[k] = map[t[k]];
+            }
+            out.f.push(nt);
+        }
+        out
+    }
+}
+
+/// Adds a small closed sphere (80 faces) beside the mesh, so that the mesh's
+/// bounding-box diagonal more than doubles: a hole that spans the whole part (the
+/// open end of a tube) is then not taken for the outer border of a scan by the
+/// default `[border]` rule (`max_bbox_share = 0.6`), as in a scan with a second part.
+pub fn with_companion(mut s: Soup) -> Soup {
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for p in &s.v {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    let d = ((hi[0] - lo[0]).powi(2) + (hi[1] - lo[1]).powi(2) + (hi[2] - lo[2]).powi(2)).sqrt();
+    let off = 0.75 * d;
+    let ball = icosphere(1);
+    let base = s.v.len();
+    let r = 0.01 * d;
+    for p in &ball.v {
+        s.v.push([
+            hi[0] + off + r * p[0],
+            hi[1] + off + r * p[1],
+            hi[2] + off + r * p[2],
+        ]);
+    }
+    for f in &ball.f {
+        s.f.push(f.map(|i| i + base));
+    }
+    s
+}
+
+/// Sizes of the boundary loops (sorted, largest first); `None` when the boundary is
+/// not a set of simple loops (a vertex with more than one outgoing boundary edge).
+pub fn boundary_loop_sizes(s: &Soup) -> Option<Vec<usize>> {
+    let mut dir: HashMap<(usize, usize), u32> = HashMap::new();
+    for f in &s.f {
+        for k in 0..3 {
+            *dir.entry((f[k], f[(k + 1) % 3])).or_default() += 1;
+        }
+    }
+    if dir.values().any(|&c| c > 1) {
+        return None;
+    }
+    // boundary half-edges run opposite to the face edges with no twin
+    let mut next: HashMap<usize, usize> = HashMap::new();
+    for &(a, b) in dir.keys() {
+        if !dir.contains_key(&(b, a)) && next.insert(b, a).is_some() {
+            return None;
+        }
+    }
+    let mut seen: HashMap<usize, bool> = HashMap::new();
+    let mut sizes = Vec::new();
+    let mut starts: Vec<usize> = next.keys().copied().collect();
+    starts.sort_unstable();
+    for s0 in starts {
+        if seen.contains_key(&s0) {
+            continue;
+        }
+        let mut c = s0;
+        let mut n = 0;
+        loop {
+            seen.insert(c, true);
+            n += 1;
+            c = *next.get(&c)?;
+            if c == s0 {
+                break;
+            }
+            if n > next.len() {
+                return None;
+            }
+        }
+        sizes.push(n);
+    }
+    sizes.sort_unstable_by(|a, b| b.cmp(a));
+    Some(sizes)
+}
+
+/// A grid of `nx` x `ny` quads of edge `h` (two triangles each, normal +z before the
+/// height map), vertex `(i, j)` at `(x0 + i h, y0 + j h, z(x, y))`.
+pub fn grid(nx: usize, ny: usize, h: f64, x0: f64, y0: f64, z: impl Fn(f64, f64) -> f64) -> Soup {
+    let mut s = Soup::default();
+    for j in 0..=ny {
+        for i in 0..=nx {
+            let (x, y) = (x0 + i as f64 * h, y0 + j as f64 * h);
+            s.v.push([x, y, z(x, y)]);
+        }
+    }
+    let id = |i: usize, j: usize| j * (nx + 1) + i;
+    for j in 0..ny {
+        for i in 0..nx {
+            // alternate the diagonal so that no direction is preferred
+            if (i + j) % 2 == 0 {
+                s.f.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+                s.f.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+            } else {
+                s.f.push([id(i, j), id(i + 1, j), id(i, j + 1)]);
+                s.f.push([id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+    }
+    s
+}
+
+/// Index of the grid quad holding the point `(x, y)` of a [`grid`] at the origin.
+fn quad_of(c: V3, h: f64) -> (i64, i64) {
+    ((c[0] / h).floor() as i64, (c[1] / h).floor() as i64)
+}
+
+/// A closed cylinder of radius `r` around the z axis: `n` vertices per ring, `m`
+/// quads along z of height `dz`, both ends closed by a fan to a centre vertex.
+/// `open_top`: leave the top end open (a round hole of `n` boundary vertices).
+pub fn cylinder(r: f64, n: usize, m: usize, dz: f64, open_top: bool) -> Soup {
+    let mut s = Soup::default();
+    for j in 0..=m {
+        for i in 0..n {
+            let t = TAU * i as f64 / n as f64;
+            s.v.push([r * t.cos(), r * t.sin(), j as f64 * dz]);
+        }
+    }
+    let id = |i: usize, j: usize| j * n + (i % n);
+    for j in 0..m {
+        for i in 0..n {
+            // outward: (i, j) -> (i+1, j) -> (i+1, j+1)
+            s.f.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+            s.f.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+        }
+    }
+    let bottom = s.v.len();
+    s.v.push([0.0, 0.0, 0.0]);
+    for i in 0..n {
+        s.f.push([bottom, id(i + 1, 0), id(i, 0)]);
+    }
+    if !open_top {
+        let top = s.v.len();
+        s.v.push([0.0, 0.0, m as f64 * dz]);
+        for i in 0..n {
+            s.f.push([top, id(i, m), id(i + 1, m)]);
+        }
+    }
+    s
+}
+
+/// Ring count and angular step of a cylinder with near-equilateral quads.
+fn cyl_ring(r: f64, n: usize) -> f64 {
+    TAU * r / n as f64
+}
+
+/// (a) A long slot cut along a dense closed cylinder of radius 1 with `n` vertices
+/// per ring: `w` quads wide, `len` quads long, so the loop has `2 len + 2 w` boundary
+/// vertices (len = 5000, w = 4: 10,008). The true surface is the cylinder.
+pub fn cylinder_slot(n: usize, w: usize, len: usize) -> Soup {
+    let dz = cyl_ring(1.0, n);
+    let m = len + 20;
+    let c = cylinder(1.0, n, m, dz, false);
+    let j0 = 10;
+    let z0 = j0 as f64 * dz;
+    let z1 = (j0 + len) as f64 * dz;
+    let dt = TAU / n as f64;
+    c.remove_faces(|p, _| {
+        let t = p[1].atan2(p[0]).rem_euclid(TAU);
+        let r2 = p[0] * p[0] + p[1] * p[1];
+        r2 > 0.25 && t < w as f64 * dt && p[2] > z0 && p[2] < z1
+    })
+}
+
+/// (b) The open end of a closed-bottom cylinder of radius 1 with `n` vertices per ring
+/// (a round hole of `n` boundary vertices), `rings` quads high.
+pub fn cylinder_end(n: usize, rings: usize) -> Soup {
+    cylinder(1.0, n, rings, cyl_ring(1.0, n), true)
+}
+
+/// A unit icosphere subdivided `level` times, outward oriented.
+pub fn icosphere(level: usize) -> Soup {
+    let t = (1.0 + 5f64.sqrt()) / 2.0;
+    let norm = |p: V3| {
+        let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+        [p[0] / l, p[1] / l, p[2] / l]
+    };
+    let mut v: Vec<V3> = [
+        [-1., t, 0.],
+        [1., t, 0.],
+        [-1., -t, 0.],
+        [1., -t, 0.],
+        [0., -1., t],
+        [0., 1., t],
+        [0., -1., -t],
+        [0., 1., -t],
+        [t, 0., -1.],
+        [t, 0., 1.],
+        [-t, 0., -1.],
+        [-t, 0., 1.],
+    ]
+    .iter()
+    .map(|p| norm(*p))
+    .collect();
+    let mut f: Vec<[usize; 3]> = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    for _ in 0..level {
+        let mut mid: HashMap<(usize, usize), usize> = HashMap::new();
+        let mut nf = Vec::with_capacity(f.len() * 4);
+        for &[a, b, c] in &f {
+            let mut m = |a: usize, b: usize| -> usize {
+                *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                    let p = norm([
+                        (v[a][0] + v[b][0]) / 2.0,
+                        (v[a][1] + v[b][1]) / 2.0,
+                        (v[a][2] + v[b][2]) / 2.0,
+                    ]);
+                    v.push(p);
+                    v.len() - 1
+                })
+            };
+            let ab = m(a, b);
+            let bc = m(b, c);
+            let ca = m(c, a);
+            nf.push([a, ab, ca]);
+            nf.push([b, bc, ab]);
+            nf.push([c, ca, bc]);
+            nf.push([ab, bc, ca]);
+        }
+        f = nf;
+    }
+    Soup { v, f }
+}
+
+/// A unit icosphere with the cap of faces whose centroid lies within angle `cap`
+/// (radians) of +z removed: a round hole on a curved surface.
+pub fn sphere_cap(level: usize, cap: f64) -> Soup {
+    let s = icosphere(level);
+    let d = [0.3f64, 0.2, 1.0];
+    let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    let d = d.map(|x| x / l);
+    s.remove_faces(|c, _| {
+        let lc = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+        let cosang = (c[0] * d[0] + c[1] * d[1] + c[2] * d[2]) / lc;
+        cosang > cap.cos()
+    })
+}
+
+/// A rectilinear spiral hole in a gently curved grid (z = 0.05 (x² + y²) on a
+/// grid of edge 1/16): arms `width` quads wide, separated by `gap` quads, `turns`
+/// quarter-turns. One loop (plus the grid's outer border).
+pub fn spiral(width: i64, gap: i64, turns: usize) -> Soup {
+    let h = 1.0 / 16.0;
+    let pitch = width + gap;
+    // the grid is wide enough that its outer border is the longest loop and the
+    // spiral spans well under `border.max_bbox_share` of it
+    let half = 2 * (turns as i64 / 2 + 2) * pitch + 8;
+    let n = (2 * half) as usize;
+    let x0 = -(half as f64) * h;
+    let g = grid(n, n, h, x0, x0, |x, y| 0.05 * (x * x + y * y));
+    // the spiral as a set of quads (i, j) relative to the centre
+    let mut cells = std::collections::HashSet::new();
+    let (mut x, mut y) = (0i64, 0i64);
+    let dirs = [(1i64, 0i64), (0, 1), (-1, 0), (0, -1)];
+    for t in 0..turns {
+        let (dx, dy) = dirs[t % 4];
+        let len = pitch * (t as i64 / 2 + 1);
+        for _ in 0..len {
+            for a in 0..width {
+                for b in 0..width {
+                    cells.insert((x + a, y + b));
+                }
+            }
+            x += dx;
+            y += dy;
+        }
+    }
+    g.remove_faces(|c, _| {
+        let (i, j) = quad_of([c[0] - x0, c[1] - x0, 0.0], h);
+        cells.contains(&(i - half, j - half))
+    })
+}
+
+/// A horseshoe hole whose two arms are separated by one row of quads squeezed to
+/// `thin` of the grid edge (the boundary nearly touches itself), on a flat grid.
+pub fn near_touch(arm: usize, thin: f64) -> Soup {
+    let h = 1.0 / 16.0;
+    let n = arm + 12;
+    let mut g = grid(n, 16, h, 0.0, 0.0, |_, _| 0.0);
+    // hole: rows 5..7 (lower arm) and 8..10 (upper arm), joined at columns 4..6;
+    // row 7 (between the arms) is kept for columns >= 6
+    let (c0, c1) = (4usize, 4 + arm);
+    let removed = |i: usize, j: usize| -> bool {
+        (c0..c1).contains(&i) && (5..10).contains(&j) && !(j == 7 && i >= c0 + 2)
+    };
+    // squeeze the kept row: lines y = 7h and y = 8h move towards 7.5h
+    let mid = 7.5 * h;
+    for p in g.v.iter_mut() {
+        let j = (p[1] / h).round() as i64;
+        let i = (p[0] / h).round() as i64;
+        if (j == 7 || j == 8) && i >= (c0 + 2) as i64 && i <= c1 as i64 {
+            p[1] = mid + (p[1] - mid) * thin;
+        }
+    }
+    // faces are removed by their quad (from the vertex indices: robust to the squeeze)
+    let nx = n + 1;
+    g.remove_faces(|_, f| {
+        let i = f.iter().map(|&v| v % nx).min().unwrap_or(0);
+        let j = f.iter().map(|&v| v / nx).min().unwrap_or(0);
+        removed(i, j)
+    })
+}
+
+/// A round hole in a flat grid whose boundary has a sliver: one boundary vertex is
+/// pushed almost onto its boundary neighbour (a face of angle below a degree behind
+/// the loop) and another almost onto the line through its two boundary neighbours.
+pub fn sliver_hole(radius_quads: f64) -> Soup {
+    let h = 1.0 / 16.0;
+    let n = (2.0 * radius_quads) as usize + 12;
+    let c = n as f64 * h / 2.0;
+    let g = grid(n, n, h, 0.0, 0.0, |_, _| 0.0);
+    let r = radius_quads * h;
+    let mut s = g.remove_faces(|p, _| {
+        let (i, j) = quad_of(p, h);
+        let q = [(i as f64 + 0.5) * h - c, (j as f64 + 0.5) * h - c];
+        (q[0] * q[0] + q[1] * q[1]).sqrt() < r
+    });
+    // the boundary vertices, in loop order
+    let lp = boundary_loops(&s)
+        .into_iter()
+        .min_by_key(|l| l.len())
+        .unwrap_or_default();
+    if lp.len() > 10 {
+        let k = lp.len();
+        // (1) vertex 0 almost onto vertex 1
+        let (a, b) = (s.v[lp[0]], s.v[lp[1]]);
+        s.v[lp[0]] = [
+            b[0] + (a[0] - b[0]) * 0.01,
+            b[1] + (a[1] - b[1]) * 0.01,
+            0.0,
+        ];
+        // (2) vertex k/2 almost onto the segment of its neighbours
+        let (p, q, m) = (s.v[lp[k / 2 - 1]], s.v[lp[k / 2 + 1]], s.v[lp[k / 2]]);
+        let mid = [(p[0] + q[0]) / 2.0, (p[1] + q[1]) / 2.0];
+        s.v[lp[k / 2]] = [
+            mid[0] + (m[0] - mid[0]) * 0.01,
+            mid[1] + (m[1] - mid[1]) * 0.01,
+            0.0,
+        ];
+    }
+    s
+}
+
+/// The boundary loops of a soup, each in boundary order.
+pub fn boundary_loops(s: &Soup) -> Vec<Vec<usize>> {
+    let mut dir = std::collections::HashSet::new();
+    for f in &s.f {
+        for k in 0..3 {
+            dir.insert((f[k], f[(k + 1) % 3]));
+        }
+    }
+    let mut next: HashMap<usize, usize> = HashMap::new();
+    for &(a, b) in &dir {
+        if !dir.contains(&(b, a)) {
+            next.insert(b, a);
+        }
+    }
+    let mut starts: Vec<usize> = next.keys().copied().collect();
+    starts.sort_unstable();
+    let mut seen = std::collections::HashSet::new();
+    let mut out = Vec::new();
+    for s0 in starts {
+        if seen.contains(&s0) {
+            continue;
+        }
+        let mut l = vec![s0];
+        seen.insert(s0);
+        let mut c = next[&s0];
+        while c != s0 && seen.insert(c) {
+            l.push(c);
+            c = match next.get(&c) {
+                Some(&x) => x,
+                None => break,
+            };
+        }
+        out.push(l);
+    }
+    out
+}
+
+/// A nearly flat round hole of `n` boundary vertices: a flat annulus (`rings` rings of
+/// quads outside the hole) with height noise of `noise` times the edge length.
+pub fn flat_annulus(n: usize, rings: usize, noise: f64) -> Soup {
+    let r0 = 1.0;
+    let h = TAU * r0 / n as f64;
+    let mut s = Soup::default();
+    // deterministic noise
+    let mut state: u64 = 0x9E37_79B9_7F4A_7C15;
+    let mut rnd = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    };
+    for j in 0..=rings {
+        let r = r0 + j as f64 * h;
+        for i in 0..n {
+            let t = TAU * i as f64 / n as f64;
+            s.v.push([r * t.cos(), r * t.sin(), noise * h * rnd()]);
+        }
+    }
+    let id = |i: usize, j: usize| j * n + (i % n);
+    for j in 0..rings {
+        for i in 0..n {
+            s.f.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+            s.f.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+        }
+    }
+    s
+}
+
+/// A round hole (radius 0.6) in a saddle z = a (x² - y²) over [-1, 1]²: the loop is
+/// strongly non-planar (up and down twice).
+pub fn saddle(a: f64, quads: usize) -> Soup {
+    let h = 2.0 / quads as f64;
+    let g = grid(quads, quads, h, -1.0, -1.0, |x, y| a * (x * x - y * y));
+    g.remove_faces(|c, _| {
+        let (i, j) = ((c[0] + 1.0) / h, (c[1] + 1.0) / h);
+        let q = [(i.floor() + 0.5) * h - 1.0, (j.floor() + 0.5) * h - 1.0];
+        (q[0] * q[0] + q[1] * q[1]).sqrt() < 0.6
+    })
+}
+
+/// Distance of a point to the unit cylinder around the z axis.
+pub fn cylinder_distance(p: V3) -> f64 {
+    ((p[0] * p[0] + p[1] * p[1]).sqrt() - 1.0).abs()
+}
