@@ -91,8 +91,16 @@ impl Default for Dispatch {
             small: vec![Method::Fan, Method::MinAreaFair],
             // chosen from the methods table (README): wavefront first is the most
             // accurate on middle and large bench holes, with the best triangles
-            middle: vec![Method::Wavefront, Method::MinAreaFair, Method::AdvancingFront],
-            large: vec![Method::Wavefront, Method::AdvancingFront, Method::MinAreaFair],
+            middle: vec![
+                Method::Wavefront,
+                Method::MinAreaFair,
+                Method::AdvancingFront,
+            ],
+            large: vec![
+                Method::Wavefront,
+                Method::AdvancingFront,
+                Method::MinAreaFair,
+            ],
         }
     }
 }
@@ -348,6 +356,8 @@ pub struct Wavefront {
     /// A new point closer than this times the hole's mean boundary edge length to a
     /// non-adjacent front vertex is merged into it.
     pub merge_distance: f64,
+    /// A loop with more boundary vertices is left to the next method (0: no limit).
+    pub max_boundary_vertices: usize,
 }
 
 impl Default for Wavefront {
@@ -360,6 +370,7 @@ impl Default for Wavefront {
             placement: WavefrontPlacement::EdgePlane,
             max_steps_per_vertex: 200,
             merge_distance: 0.5,
+            max_boundary_vertices: 2000,
         }
     }
 }
@@ -624,6 +635,7 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
             "placement",
             "max_steps_per_vertex",
             "merge_distance",
+            "max_boundary_vertices",
         ],
     ),
     (
@@ -643,7 +655,10 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
         ],
     ),
     ("checks", &["self_intersection", "min_angle_deg"]),
-    ("limits", &["hole_time_ms", "threads", "max_patch_triangles"]),
+    (
+        "limits",
+        &["hole_time_ms", "threads", "max_patch_triangles"],
+    ),
     (
         "smooth",
         &[
@@ -1370,6 +1385,9 @@ impl Reader<'_> {
                 p.wavefront.max_steps_per_vertex = self.usize(key, v)?
             }
             ("wavefront", "merge_distance") => p.wavefront.merge_distance = self.float(key, v)?,
+            ("wavefront", "max_boundary_vertices") => {
+                p.wavefront.max_boundary_vertices = self.usize(key, v)?
+            }
             ("lssvm", "rings") => p.lssvm.rings = self.usize(key, v)?,
             ("lssvm", "gamma") => p.lssvm.gamma = self.float(key, v)?,
             ("lssvm", "kernel_width") => p.lssvm.kernel_width = self.float(key, v)?,

@@ -16,20 +16,38 @@ fn holed_sphere() -> (Soup, usize) {
     (s, 3)
 }
 
+/// Paper 002's thin-plate methods for middle and large holes (the default puts
+/// wavefront first).
+const THIN_PLATE: &str = "[dispatch]\nmiddle = [\"min_area_fair\", \"advancing_front\"]\nlarge = [\"advancing_front\", \"min_area_fair\"]\n";
+
 #[test]
 fn sphere_holes_are_closed_on_the_sphere_and_input_is_bit_exact() {
+    // the large hole is a cap 0.7 wide (sagitta about 0.25). Bounds on the radial
+    // error of the new vertices: the thin-plate patch (a minimiser of bending, which a
+    // sphere nearly is) within 5 % of the radius at worst and 2 % mean; the default's
+    // wavefront (front placement + curvature restoration, no global solve) within 12 %
+    // and 3 % (measured 10 % and 1.4 %)
+    sphere_case(None, 0.05, 0.02);
+    sphere_case(Some("default"), 0.12, 0.03);
+}
+
+fn sphere_case(policy: Option<&str>, max_bound: f64, mean_bound: f64) {
     let dir = tempdir();
     let (s, nholes) = holed_sphere();
     assert!(s.f.len() > 4000);
     let inp = dir.path().join("sphere.obj");
     let out = dir.path().join("out.obj");
     let rep = dir.path().join("sphere.repair.json");
+    let pol = dir.path().join("policy.toml");
+    std::fs::write(&pol, if policy.is_some() { "" } else { THIN_PLATE }).unwrap();
     write_obj(&inp, &s);
     assert!(boundary_edges(&s) > 0);
     let o = run(&[
         "fill",
         inp.to_str().unwrap(),
         out.to_str().unwrap(),
+        "--policy",
+        pol.to_str().unwrap(),
         "--report",
         rep.to_str().unwrap(),
     ]);
@@ -61,8 +79,7 @@ fn sphere_holes_are_closed_on_the_sphere_and_input_is_bit_exact() {
     for (i, f) in s.f.iter().enumerate() {
         assert_eq!(r.f[i], *f, "face {i} changed");
     }
-    // new vertices near the sphere. The large hole is a cap 0.7 wide (sagitta about
-    // 0.25): the thin-plate patch stays within 5 % of the radius at worst, 2 % mean.
+    // new vertices near the sphere
     let new: Vec<f64> = r.v[s.v.len()..]
         .iter()
         .map(|&p| (radius(p) - 1.0).abs())
@@ -70,8 +87,8 @@ fn sphere_holes_are_closed_on_the_sphere_and_input_is_bit_exact() {
     assert!(!new.is_empty());
     let max = new.iter().cloned().fold(0.0, f64::max);
     let mean = new.iter().sum::<f64>() / new.len() as f64;
-    assert!(max < 0.05, "max radial error {max}");
-    assert!(mean < 0.02, "mean radial error {mean}");
+    assert!(max < max_bound, "{policy:?}: max radial error {max}");
+    assert!(mean < mean_bound, "{policy:?}: mean radial error {mean}");
 
     let log: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
@@ -105,22 +122,37 @@ fn torus_hole_stays_on_the_torus() {
     let inp = dir.path().join("torus.obj");
     let out = dir.path().join("torus.out.obj");
     write_obj(&inp, &s);
-    let o = run(&["fill", inp.to_str().unwrap(), out.to_str().unwrap(), "-q"]);
-    assert_eq!(
-        o.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    let r = read_obj(&out);
-    assert_eq!(boundary_edges(&r), 0);
-    let errs: Vec<f64> = r.v[s.v.len()..]
-        .iter()
-        .map(|&p| torus_distance(p, 2.0, 0.7))
-        .collect();
-    let mean = errs.iter().sum::<f64>() / errs.len().max(1) as f64;
-    // bound: 2 % of the minor radius on average
-    assert!(mean < 0.014, "mean distance to the torus {mean}");
+    // bounds on the mean distance: thin plate 2 % of the minor radius, the default
+    // (wavefront) 5 % (measured 4.2 %)
+    for (policy, bound) in [(THIN_PLATE, 0.014), ("", 0.035)] {
+        let pol = dir.path().join("policy.toml");
+        std::fs::write(&pol, policy).unwrap();
+        let o = run(&[
+            "fill",
+            inp.to_str().unwrap(),
+            out.to_str().unwrap(),
+            "-q",
+            "--policy",
+            pol.to_str().unwrap(),
+        ]);
+        assert_eq!(
+            o.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let r = read_obj(&out);
+        assert_eq!(boundary_edges(&r), 0);
+        let errs: Vec<f64> = r.v[s.v.len()..]
+            .iter()
+            .map(|&p| torus_distance(p, 2.0, 0.7))
+            .collect();
+        let mean = errs.iter().sum::<f64>() / errs.len().max(1) as f64;
+        assert!(
+            mean < bound,
+            "mean distance to the torus {mean} (bound {bound})"
+        );
+    }
 }
 
 #[test]

@@ -1842,6 +1842,7 @@ mod tests {
             hole: &hole,
             policy,
             deadline: Deadline::none(),
+            checker: None,
         };
         let patch = fill(&ctx).map_err(|e| e.to_string())?;
         let front = initial_front(
@@ -2111,6 +2112,7 @@ mod tests {
             hole: &hole,
             policy: &policy,
             deadline: Deadline(Some(std::time::Instant::now())),
+            checker: None,
         };
         assert_eq!(fill(&ctx), Err(FillError::Timeout));
     }
@@ -2128,6 +2130,7 @@ mod tests {
             hole: &hole,
             policy: &policy,
             deadline: Deadline::none(),
+            checker: None,
         };
         assert!(matches!(fill(&ctx), Err(FillError::Failed(_))));
     }
@@ -2147,6 +2150,7 @@ mod tests {
             hole: &hole,
             policy: &policy,
             deadline: Deadline::none(),
+            checker: None,
         };
         let l = hole.mean_edge_length;
         for start in [Start::MinArea, Start::ResidualFront] {

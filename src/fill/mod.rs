@@ -123,6 +123,9 @@ pub struct FillContext<'a> {
     pub hole: &'a Hole,
     pub policy: &'a Policy,
     pub deadline: Deadline,
+    /// The dispatcher's checks over `mesh`, for a method that checks its own patch
+    /// (`None`: the method builds its own, which costs a tree over the whole mesh).
+    pub checker: Option<&'a Checker>,
 }
 
 impl FillContext<'_> {
@@ -188,6 +191,7 @@ fn attempt(
         hole,
         policy,
         deadline: Deadline::after_ms(policy.limits.hole_time_ms),
+        checker: Some(checker),
     };
     let failed = |outcome, reason: String| Attempt {
         method,

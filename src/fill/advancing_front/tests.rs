@@ -225,6 +225,7 @@ fn run(mesh: &Mesh, lp: &[VertexId], policy: &Policy) -> (Hole, Result<Patch, Fi
         hole: &hole,
         policy,
         deadline: Deadline::none(),
+        checker: None,
     };
     let r = fill(&ctx);
     (hole, r)
@@ -831,6 +832,7 @@ fn expired_deadline_times_out() {
         hole: &hole,
         policy: &policy,
         deadline: Deadline(Some(std::time::Instant::now())),
+        checker: None,
     };
     assert_eq!(fill(&ctx), Err(FillError::Timeout));
 }
@@ -965,6 +967,7 @@ fn gives_up_at_once_past_the_patch_size_limit() {
         hole: &Hole::new(0, &mesh, lp.clone(), &policy),
         policy: &policy,
         deadline: Deadline::none(),
+        checker: None,
     });
     policy.limits.max_patch_triangles = (est as usize + 1).max(100);
     let (_, r) = run(&mesh, &lp, &policy);

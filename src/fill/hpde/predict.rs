@@ -740,6 +740,7 @@ mod tests {
             hole: &hole,
             policy: &policy,
             deadline: Deadline::none(),
+            checker: None,
         };
         let mut rng = ChaCha8Rng::seed_from_u64(1);
         use rand::SeedableRng;

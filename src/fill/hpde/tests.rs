@@ -201,6 +201,7 @@ fn run(mesh: &Mesh, lp: &[VertexId], policy: &Policy) -> (Hole, Result<Patch, Fi
         hole: &hole,
         policy,
         deadline: Deadline::none(),
+        checker: None,
     };
     let r = fill(&ctx);
     (hole, r)
@@ -420,6 +421,7 @@ fn expired_deadline_times_out() {
         hole: &hole,
         policy: &policy,
         deadline: Deadline(Some(std::time::Instant::now())),
+        checker: None,
     };
     assert_eq!(fill(&ctx), Err(FillError::Timeout));
 }
@@ -551,6 +553,7 @@ fn the_wrapper_keeps_a_passing_patch() {
         hole: &hole,
         policy: &policy,
         deadline: Deadline::none(),
+        checker: None,
     };
     let once = fill_once(&ctx).unwrap();
     crate::check::Checker::new(&mesh)

@@ -45,6 +45,7 @@ fn fill_checked(mesh: &mut Mesh, hole: &Hole, policy: &Policy) -> Patch {
         hole,
         policy,
         deadline: Deadline::none(),
+        checker: None,
     };
     let patch = fill(&ctx).unwrap();
     check_topology(mesh, &hole.vertices, &patch).unwrap();
@@ -378,7 +379,7 @@ proptest! {
     ) {
         let (mut mesh, hole, mut policy) = star_hole(&radii, lift);
         policy.refine.restricted_search_above = restricted;
-        let ctx = FillContext { mesh: &mesh, hole: &hole, policy: &policy, deadline: Deadline::none() };
+        let ctx = FillContext { mesh: &mesh, hole: &hole, policy: &policy, deadline: Deadline::none(), checker: None };
         let patch = fill(&ctx).unwrap();
         check_topology(&mesh, &hole.vertices, &patch).unwrap();
         apply_patch(&mut mesh, &hole, &patch).unwrap();
@@ -396,6 +397,7 @@ fn voronoi_normalisation_beats_the_raw_cotangent_operator_on_the_sphere() {
             hole: &hole,
             policy: &policy,
             deadline: Deadline::none(),
+            checker: None,
         };
         let patch = fill(&ctx).unwrap();
         let err = |norm| {

@@ -35,7 +35,8 @@ pub fn first_passing_at(
     variants: &[(&str, Policy)],
     run: impl Fn(usize, &FillContext) -> Result<Patch, FillError>,
 ) -> Result<Patch, FillError> {
-    let mut checker: Option<Checker> = None;
+    // the dispatcher's checker when there is one; else one built on first use
+    let mut own: Option<Checker> = None;
     let mut reasons: Vec<String> = Vec::new();
     for (at, (name, pol)) in variants.iter().enumerate() {
         ctx.deadline.check()?;
@@ -44,13 +45,17 @@ pub fn first_passing_at(
             hole: ctx.hole,
             policy: pol,
             deadline: ctx.deadline,
+            checker: ctx.checker,
         };
         match run(at, &sub) {
             Ok(p) => {
                 if variants.len() == 1 {
                     return Ok(p);
                 }
-                let c = checker.get_or_insert_with(|| Checker::new(ctx.mesh));
+                let c: &Checker = match ctx.checker {
+                    Some(c) => c,
+                    None => own.get_or_insert_with(|| Checker::new(ctx.mesh)),
+                };
                 match c.check_patch(ctx.mesh, &ctx.hole.vertices, &p, &ctx.policy.checks) {
                     Ok(_) => return Ok(p),
                     Err(e) => {
@@ -392,6 +397,7 @@ mod tests {
             hole: &hole,
             policy: &policy,
             deadline: Deadline::none(),
+            checker: None,
         };
         let mut patch = crate::fill::min_area_fair::fill(&ctx).unwrap();
         let checker = Checker::new(&mesh);
