@@ -116,6 +116,7 @@ const UNIFORM_WEIGHT: f64 = 1.154_700_538_379_251_5;
 /// that closes a stuck loop as a residual front; then both with `iterations = 1` and
 /// the prediction halved (`gamma` / 4, a smoother regression).
 pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
+    super::check_patch_size(ctx)?;
     let p = ctx.policy.clone();
     let mut soft = p.clone();
     soft.lssvm.iterations = 1;

@@ -143,6 +143,26 @@ impl FillContext<'_> {
     }
 }
 
+/// For methods without a coarsening of their own (`wavefront`, `hpde`,
+/// `lssvm_poisson`): `Err` at once when a patch at the loop's mean edge length would
+/// pass `limits.max_patch_triangles` (the loop's projected area over the area of an
+/// equilateral triangle; a lower bound), so that a hole they cannot finish in time goes
+/// to the next method without spending the time limit.
+pub fn check_patch_size(ctx: &FillContext) -> Result<(), FillError> {
+    let cap = ctx.policy.limits.max_patch_triangles;
+    let l = ctx.hole.mean_edge_length;
+    if cap == 0 || !(l > 0.0) {
+        return Ok(());
+    }
+    let est = geom::vector_area(&ctx.boundary_positions()) / (0.75f64.sqrt() / 2.0 * l * l);
+    if est > cap as f64 {
+        return Err(FillError::Failed(format!(
+            "the patch would have about {est:.0} triangles > limits.max_patch_triangles = {cap}"
+        )));
+    }
+    Ok(())
+}
+
 /// Runs one method.
 pub fn run_method(method: Method, ctx: &FillContext) -> Result<Patch, FillError> {
     match method {

@@ -153,17 +153,7 @@ pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
             ctx.hole.len()
         )));
     }
-    let cap = ctx.policy.limits.max_patch_triangles;
-    let l = ctx.hole.mean_edge_length;
-    if cap > 0 && l > 0.0 {
-        let est =
-            super::geom::vector_area(&ctx.boundary_positions()) / (0.75f64.sqrt() / 2.0 * l * l);
-        if est > cap as f64 {
-            return Err(FillError::Failed(format!(
-                "the patch would have about {est:.0} triangles > limits.max_patch_triangles = {cap}"
-            )));
-        }
-    }
+    super::check_patch_size(ctx)?;
     retry::first_passing(ctx, &variants(ctx.policy), |c| {
         fill_with_stats(c).map(|(p, _)| p)
     })

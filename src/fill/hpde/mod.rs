@@ -114,6 +114,7 @@ use std::collections::{BTreeSet, HashMap};
 /// first; when their patch fails the checks (after a local repair by edge flips), the
 /// variants of [`variants`] (see [`super::wavefront::retry`]).
 pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
+    super::check_patch_size(ctx)?;
     super::wavefront::retry::first_passing(ctx, &variants(ctx.policy), fill_once)
 }
 
