@@ -358,6 +358,10 @@ pub struct Wavefront {
     pub merge_distance: f64,
     /// A loop with more boundary vertices is left to the next method (0: no limit).
     pub max_boundary_vertices: usize,
+    /// The front has run away (climbed over the hole into a dome or folded) when its
+    /// patch's area passes this many times the loop's vector area: the run stops and
+    /// the method goes on to its residual-closing variants (0: no limit).
+    pub max_area_ratio: f64,
 }
 
 impl Default for Wavefront {
@@ -371,6 +375,7 @@ impl Default for Wavefront {
             max_steps_per_vertex: 200,
             merge_distance: 0.5,
             max_boundary_vertices: 2000,
+            max_area_ratio: 2.5,
         }
     }
 }
@@ -636,6 +641,7 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
             "max_steps_per_vertex",
             "merge_distance",
             "max_boundary_vertices",
+            "max_area_ratio",
         ],
     ),
     (
@@ -965,6 +971,16 @@ impl Policy {
             ));
         }
         closed("wavefront.merge_distance", w.merge_distance, 0.0, 1.0)?;
+        finite("wavefront.max_area_ratio", w.max_area_ratio)?;
+        if !(w.max_area_ratio == 0.0 || w.max_area_ratio >= 1.0) {
+            return Err(Invalid::new(
+                "wavefront.max_area_ratio",
+                format!(
+                    "must be 0 (no limit) or at least 1 (got {})",
+                    w.max_area_ratio
+                ),
+            ));
+        }
         if w.max_steps_per_vertex < 1 {
             return Err(Invalid::new(
                 "wavefront.max_steps_per_vertex",
@@ -1388,6 +1404,7 @@ impl Reader<'_> {
             ("wavefront", "max_boundary_vertices") => {
                 p.wavefront.max_boundary_vertices = self.usize(key, v)?
             }
+            ("wavefront", "max_area_ratio") => p.wavefront.max_area_ratio = self.float(key, v)?,
             ("lssvm", "rings") => p.lssvm.rings = self.usize(key, v)?,
             ("lssvm", "gamma") => p.lssvm.gamma = self.float(key, v)?,
             ("lssvm", "kernel_width") => p.lssvm.kernel_width = self.float(key, v)?,

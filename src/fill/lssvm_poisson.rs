@@ -116,6 +116,14 @@ const UNIFORM_WEIGHT: f64 = 1.154_700_538_379_251_5;
 /// that closes a stuck loop as a residual front; then both with `iterations = 1` and
 /// the prediction halved (`gamma` / 4, a smoother regression).
 pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
+    fill_checked(ctx).map(|(p, _)| p)
+}
+
+/// [`fill`], with the quality of the checks the patch passed (see
+/// [`super::run_method_checked`]).
+pub fn fill_checked(
+    ctx: &FillContext,
+) -> Result<(Patch, Option<crate::report::PatchQuality>), FillError> {
     super::check_patch_size(ctx)?;
     let p = ctx.policy.clone();
     let mut soft = p.clone();

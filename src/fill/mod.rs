@@ -151,7 +151,7 @@ impl FillContext<'_> {
 pub fn check_patch_size(ctx: &FillContext) -> Result<(), FillError> {
     let cap = ctx.policy.limits.max_patch_triangles;
     let l = ctx.hole.mean_edge_length;
-    if cap == 0 || !(l > 0.0) {
+    if cap == 0 || l.is_nan() || l <= 0.0 {
         return Ok(());
     }
     let est = geom::vector_area(&ctx.boundary_positions()) / (0.75f64.sqrt() / 2.0 * l * l);
@@ -165,13 +165,24 @@ pub fn check_patch_size(ctx: &FillContext) -> Result<(), FillError> {
 
 /// Runs one method.
 pub fn run_method(method: Method, ctx: &FillContext) -> Result<Patch, FillError> {
+    run_method_checked(method, ctx).map(|(p, _)| p)
+}
+
+/// Runs one method; with the patch, the quality of the checks it already passed
+/// inside the method (the self-checked methods `wavefront`, `hpde` and
+/// `lssvm_poisson` relax and check their patch with the dispatcher's checker, see
+/// [`wavefront::retry`]), or `None` when the dispatcher must relax and check it.
+pub fn run_method_checked(
+    method: Method,
+    ctx: &FillContext,
+) -> Result<(Patch, Option<PatchQuality>), FillError> {
     match method {
-        Method::Fan => fan::fill(ctx),
-        Method::MinAreaFair => min_area_fair::fill(ctx),
-        Method::AdvancingFront => advancing_front::fill(ctx),
-        Method::LssvmPoisson => lssvm_poisson::fill(ctx),
-        Method::Wavefront => wavefront::fill(ctx),
-        Method::Hpde => hpde::fill(ctx),
+        Method::Fan => fan::fill(ctx).map(|p| (p, None)),
+        Method::MinAreaFair => min_area_fair::fill(ctx).map(|p| (p, None)),
+        Method::AdvancingFront => advancing_front::fill(ctx).map(|p| (p, None)),
+        Method::LssvmPoisson => lssvm_poisson::fill_checked(ctx),
+        Method::Wavefront => wavefront::fill_checked(ctx),
+        Method::Hpde => hpde::fill_checked(ctx),
     }
 }
 
@@ -221,20 +232,23 @@ fn attempt(
     };
     // a method that panics (a bug, or a solver that panics on singular input)
     // fails over like any other failure: one bad hole never takes the file down
-    let result =
-        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run_method(method, &ctx)))
-            .unwrap_or_else(|_| {
-                Err(FillError::Failed(format!(
-                    "internal error in {}",
-                    method.name()
-                )))
-            })
-            .and_then(|p| {
-                ctx.deadline.check()?;
-                Ok(p)
-            });
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        run_method_checked(method, &ctx)
+    }))
+    .unwrap_or_else(|_| {
+        Err(FillError::Failed(format!(
+            "internal error in {}",
+            method.name()
+        )))
+    })
+    .and_then(|p| {
+        ctx.deadline.check()?;
+        Ok(p)
+    });
     let patch = match result {
-        Ok(p) => p,
+        // relaxed and checked by the method itself, with this checker
+        Ok((p, Some(q))) => return Ok((p, q, ms_since(ta))),
+        Ok((p, None)) => p,
         Err(FillError::Timeout) => {
             return Err(failed(
                 Outcome::Timeout,
@@ -245,7 +259,13 @@ fn attempt(
     };
     // even out the triangles tangentially; keep that only if it passes the checks
     let mut relaxed = patch.clone();
-    relax::tangential_relax(mesh, hole, &mut relaxed, policy.fair.tangential_relax, 0.5);
+    relax::tangential_relax(
+        mesh,
+        hole,
+        &mut relaxed,
+        policy.fair.tangential_relax,
+        relax::RELAX_STEP,
+    );
     if relaxed != patch {
         if let Ok(q) = checker.check_patch(mesh, &hole.vertices, &relaxed, &policy.checks) {
             return Ok((relaxed, q, ms_since(ta)));

@@ -12,6 +12,10 @@ use super::{Hole, Patch};
 use crate::mesh::Mesh;
 use glam::DVec3;
 
+/// The step of each relaxation iteration the dispatcher uses (half way to the
+/// tangential mean).
+pub const RELAX_STEP: f64 = 0.5;
+
 /// Relaxes the new vertices of `patch` in place (`iterations` Jacobi steps of `step`).
 pub fn tangential_relax(mesh: &Mesh, hole: &Hole, patch: &mut Patch, iterations: usize, step: f64) {
     let k = hole.len();

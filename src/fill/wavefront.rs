@@ -84,6 +84,12 @@
 //!     ([`residual`]: minimum-area triangulation in 3-D, refined to `Avglen`, thin-plate
 //!     faired against the triangles around it). Closes 1999 of 2000 random star-shaped
 //!     loops.
+//!   - a front whose patch area passes `max_area_ratio` (2.5) times the loop's vector
+//!     area (a lower bound on the area of any surface the loop bounds) has run away: it
+//!     climbed into a dome over the hole or folded (measured on the bench: accepted
+//!     patches up to 2.3, runaway ones 2.5 to 4.7, all four full-front variants of such a
+//!     hole ran away). The run stops at once and the other full-front variants are
+//!     skipped, straight to those that close a residual early;
 //!   - the whole run is self-checked ([`retry`]): when its patch fails the dispatcher's
 //!     checks, a local repair (edge flips, then re-triangulation of the region around the
 //!     failing triangle) is tried, then the same method with the settings of [`variants`]
@@ -103,6 +109,7 @@ pub mod retry;
 
 use super::{FillContext, FillError, Patch};
 use crate::policy::{Policy, Wavefront, WavefrontPlacement};
+use crate::report::PatchQuality;
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -135,6 +142,9 @@ const MAX_EL: f64 = 1.4;
 const MIN_FRONT_ANGLE: f64 = 1.0 * PI / 180.0;
 /// A stuck front of at most this many vertices is closed by ear clipping.
 const SMALL_FRONT: usize = 10;
+/// Start of the failure message of a front that has run away (see
+/// `wavefront.max_area_ratio`); [`fill`] then skips the other full-front variants.
+const RUNAWAY: &str = "the front ran away";
 /// A triangle spanning more cells than this is kept in a list tested every time.
 const MAX_CELLS: i64 = 512;
 
@@ -142,6 +152,12 @@ const MAX_CELLS: i64 = 512;
 /// policy's settings first; when their patch fails the checks, the variants of
 /// [`variants`] (see [`retry`]).
 pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
+    fill_checked(ctx).map(|(p, _)| p)
+}
+
+/// [`fill`], with the quality of the checks the patch passed (see
+/// [`super::run_method_checked`]).
+pub fn fill_checked(ctx: &FillContext) -> Result<(Patch, Option<PatchQuality>), FillError> {
     // a hole whose patch would pass `limits.max_patch_triangles` is left to the next
     // method at once (the front's cost grows faster than its triangle count: a round
     // hole of 1,000 vertices took 20 s): the loop's projected area over the area of an
@@ -154,8 +170,22 @@ pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
         )));
     }
     super::check_patch_size(ctx)?;
-    retry::first_passing(ctx, &variants(ctx.policy), |c| {
-        fill_with_stats(c).map(|(p, _)| p)
+    // a front that ran away under the policy's settings runs away under the other
+    // full-front settings too (measured: all four on the bench hole that does), so
+    // after one does, only the variants that close a residual early are run
+    let ran_away = std::cell::Cell::new(false);
+    let full = ctx.policy.wavefront.max_steps_per_vertex;
+    retry::first_passing_at(ctx, &variants(ctx.policy), |_, c| {
+        if ran_away.get() && c.policy.wavefront.max_steps_per_vertex >= full {
+            return Err(FillError::Failed(format!(
+                "skipped: {RUNAWAY} under the policy's settings"
+            )));
+        }
+        let r = fill_with_stats(c).map(|(p, _)| p);
+        if matches!(&r, Err(FillError::Failed(e)) if e.starts_with(RUNAWAY)) {
+            ran_away.set(true);
+        }
+        r
     })
 }
 
@@ -458,6 +488,10 @@ struct Wave {
     /// The front lost its shape (a bug, never expected): the run fails cleanly.
     corrupt: bool,
     scratch: Vec<u32>,
+    /// Area of the patch triangles so far, and the runaway bound on it
+    /// (`max_area_ratio` times the loop's vector area).
+    area: f64,
+    max_area: f64,
 }
 
 fn ekey(a: u32, b: u32) -> (u32, u32) {
@@ -613,6 +647,11 @@ impl Wave {
                 .map(|&p| (p - centre).length())
                 .fold(0.0, f64::max)
             + 2.0 * len;
+        let max_area = if opts.max_area_ratio > 0.0 {
+            opts.max_area_ratio * super::geom::vector_area(&pos)
+        } else {
+            f64::INFINITY
+        };
         let mut w = Wave {
             k,
             len,
@@ -648,6 +687,8 @@ impl Wave {
             relaxed: false,
             corrupt: false,
             scratch: Vec::new(),
+            area: 0.0,
+            max_area,
         };
         // mesh faces around the hole: expected normals (Eq. 1) and obstacles
         let mut seen = HashSet::new();
@@ -800,6 +841,23 @@ impl Wave {
     }
 
     fn run(&mut self, ctx: &FillContext, opts: &Wavefront) -> Result<(), FillError> {
+        self.advance(ctx, opts)?;
+        // a front stuck high on a dome is closed as a residual: that counts too
+        self.check_area(opts)
+    }
+
+    fn check_area(&self, opts: &Wavefront) -> Result<(), FillError> {
+        if self.area > self.max_area {
+            return Err(FillError::Failed(format!(
+                "{RUNAWAY}: the patch's area passed {} times the loop's vector area \
+                 (wavefront.max_area_ratio)",
+                opts.max_area_ratio
+            )));
+        }
+        Ok(())
+    }
+
+    fn advance(&mut self, ctx: &FillContext, opts: &Wavefront) -> Result<(), FillError> {
         let cap = opts.max_steps_per_vertex.saturating_mul(self.k);
         let mu = opts.mu.to_radians();
         let (alpha, beta) = (opts.alpha.to_radians(), opts.beta.to_radians());
@@ -833,6 +891,7 @@ impl Wave {
                     "internal error: the front lost its shape".into(),
                 ));
             }
+            self.check_area(opts)?;
             if advanced {
                 stalls = 0;
                 self.relaxed = false;
@@ -1562,7 +1621,9 @@ impl Wave {
             }
         }
         self.tris.push(t);
-        let n = unit_or((p[1] - p[0]).cross(p[2] - p[0]), DVec3::ZERO);
+        let cr = (p[1] - p[0]).cross(p[2] - p[0]);
+        self.area += 0.5 * cr.length();
+        let n = unit_or(cr, DVec3::ZERO);
         self.place(Placed {
             ids: t.map(Some),
             p,
@@ -1889,6 +1950,43 @@ mod tests {
         assert!(large_on.mean < 0.03, "{}", large_on.mean);
         assert!(large_off.mean < 0.05, "{}", large_off.mean);
         assert!(large_on.mean <= large_off.mean);
+    }
+
+    /// A hole deeper than a hemisphere (cap of 109 degrees: its surface has 2.95 times
+    /// the loop's vector area): the front passes `max_area_ratio` (2.5) and stops with
+    /// the runaway failure at once, the other full-front variants are skipped, and a
+    /// residual-closing variant closes the hole with a patch that passes the checks.
+    /// Without the bound the policy's front is not stopped that way.
+    #[test]
+    fn a_front_over_a_deep_hole_stops_as_runaway_and_a_residual_variant_closes_it() {
+        let (mesh, _) = Mesh::from_raw(&sphere(3, 1.9));
+        let loops = mesh.topo.boundary_loops();
+        assert_eq!(loops.len(), 1);
+        let policy = Policy::default();
+        assert_eq!(policy.wavefront.max_area_ratio, 2.5);
+        let hole = Hole::new(0, &mesh, loops[0].clone(), &policy);
+        let ctx = FillContext {
+            mesh: &mesh,
+            hole: &hole,
+            policy: &policy,
+            deadline: Deadline::none(),
+            checker: None,
+        };
+        match fill_with_stats(&ctx) {
+            Err(FillError::Failed(e)) => assert!(e.starts_with(RUNAWAY), "{e}"),
+            other => panic!("expected the runaway failure, got {:?}", other.map(|p| p.1)),
+        }
+        let patch = fill(&ctx).unwrap();
+        accept(&mesh, &hole, &patch, &policy);
+        let mut free = policy.clone();
+        free.wavefront.max_area_ratio = 0.0;
+        let ctx = FillContext {
+            policy: &free,
+            ..ctx
+        };
+        if let Err(FillError::Failed(e)) = fill_with_stats(&ctx) {
+            assert!(!e.starts_with(RUNAWAY), "{e}");
+        }
     }
 
     /// Curvature restoration against none, over every curved oracle here: five sphere

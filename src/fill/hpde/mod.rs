@@ -114,8 +114,16 @@ use std::collections::{BTreeSet, HashMap};
 /// first; when their patch fails the checks (after a local repair by edge flips), the
 /// variants of [`variants`] (see [`super::wavefront::retry`]).
 pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
+    fill_checked(ctx).map(|(p, _)| p)
+}
+
+/// [`fill`], with the quality of the checks the patch passed (see
+/// [`super::run_method_checked`]).
+pub fn fill_checked(
+    ctx: &FillContext,
+) -> Result<(Patch, Option<crate::report::PatchQuality>), FillError> {
     super::check_patch_size(ctx)?;
-    super::wavefront::retry::first_passing(ctx, &variants(ctx.policy), fill_once)
+    super::wavefront::retry::first_passing_at(ctx, &variants(ctx.policy), |_, c| fill_once(c))
 }
 
 /// The policy, then without the short-edge collapse (a collapse can pull a vertex across

@@ -541,7 +541,8 @@ fn non_injective_projection_is_a_clean_error() {
 }
 
 /// The self-checked wrapper returns the policy's own patch when it passes the checks
-/// (so the variants change nothing on holes HPDE closes as the paper says).
+/// (so the variants change nothing on holes HPDE closes as the paper says), relaxed
+/// tangentially as the dispatcher would.
 #[test]
 fn the_wrapper_keeps_a_passing_patch() {
     let raw = crate::testutil::sphere_cap_removed(3, 1.0, DVec3::new(0.3, 0.2, 1.0), 0.6);
@@ -559,6 +560,15 @@ fn the_wrapper_keeps_a_passing_patch() {
     crate::check::Checker::new(&mesh)
         .check_patch(&mesh, &hole.vertices, &once, &policy.checks)
         .unwrap();
-    assert_eq!(fill(&ctx).unwrap(), once);
+    let mut relaxed = once.clone();
+    crate::fill::relax::tangential_relax(
+        &mesh,
+        &hole,
+        &mut relaxed,
+        policy.fair.tangential_relax,
+        crate::fill::relax::RELAX_STEP,
+    );
+    assert_ne!(relaxed, once);
+    assert_eq!(fill(&ctx).unwrap(), relaxed);
     assert_eq!(variants(&policy)[0].1, policy);
 }

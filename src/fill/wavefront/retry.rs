@@ -14,7 +14,9 @@
 
 use super::super::{FillContext, FillError, Patch};
 use crate::check::{CheckFailure, Checker};
+use crate::fill::relax::{tangential_relax, RELAX_STEP};
 use crate::policy::Policy;
+use crate::report::PatchQuality;
 use std::collections::{HashMap, HashSet};
 
 /// Runs `run` under each policy of `variants` (first = the policy as given) and returns
@@ -25,16 +27,20 @@ pub fn first_passing(
     variants: &[(&str, Policy)],
     run: impl Fn(&FillContext) -> Result<Patch, FillError>,
 ) -> Result<Patch, FillError> {
-    first_passing_at(ctx, variants, |_, c| run(c))
+    first_passing_at(ctx, variants, |_, c| run(c)).map(|(p, _)| p)
 }
 
 /// [`first_passing`] for variants that are not only policies: `run` also gets the
-/// variant's index.
+/// variant's index. Each patch is relaxed tangentially
+/// ([`crate::fill::relax::tangential_relax`], as the dispatcher does) before it is
+/// checked, the unrelaxed one kept when only it passes; the quality returned with the
+/// patch is that of the checks it passed (`None` when there is a single variant: the
+/// patch is returned as made, unchecked), so the dispatcher need not check it again.
 pub fn first_passing_at(
     ctx: &FillContext,
     variants: &[(&str, Policy)],
     run: impl Fn(usize, &FillContext) -> Result<Patch, FillError>,
-) -> Result<Patch, FillError> {
+) -> Result<(Patch, Option<PatchQuality>), FillError> {
     // the dispatcher's checker when there is one; else one built on first use
     let mut own: Option<Checker> = None;
     let mut reasons: Vec<String> = Vec::new();
@@ -50,24 +56,47 @@ pub fn first_passing_at(
         match run(at, &sub) {
             Ok(p) => {
                 if variants.len() == 1 {
-                    return Ok(p);
+                    return Ok((p, None));
                 }
                 let c: &Checker = match ctx.checker {
                     Some(c) => c,
                     None => own.get_or_insert_with(|| Checker::new(ctx.mesh)),
                 };
-                match c.check_patch(ctx.mesh, &ctx.hole.vertices, &p, &ctx.policy.checks) {
-                    Ok(_) => return Ok(p),
-                    Err(e) => {
-                        if let Some(q) = repair_by_flips(ctx, c, p.clone(), e.clone()) {
-                            return Ok(q);
+                let check =
+                    |q: &Patch| c.check_patch(ctx.mesh, &ctx.hole.vertices, q, &ctx.policy.checks);
+                // relaxed if that passes, else as it is
+                let settle = |p: Patch| -> Result<(Patch, PatchQuality), (Patch, CheckFailure)> {
+                    let mut relaxed = p.clone();
+                    tangential_relax(
+                        ctx.mesh,
+                        ctx.hole,
+                        &mut relaxed,
+                        ctx.policy.fair.tangential_relax,
+                        RELAX_STEP,
+                    );
+                    if relaxed != p {
+                        if let Ok(q) = check(&relaxed) {
+                            return Ok((relaxed, q));
                         }
-                        if let Some(q) = repair_by_retriangulation(ctx, c, p, e.clone()) {
-                            return Ok(q);
-                        }
-                        reasons.push(format!("{name}: {e}"))
+                    }
+                    match check(&p) {
+                        Ok(q) => Ok((p, q)),
+                        Err(e) => Err((p, e)),
+                    }
+                };
+                let (p, e) = match settle(p) {
+                    Ok((p, q)) => return Ok((p, Some(q))),
+                    Err(pe) => pe,
+                };
+                let repaired = repair_by_flips(ctx, c, p.clone(), e.clone())
+                    .or_else(|| repair_by_retriangulation(ctx, c, p, e.clone()));
+                if let Some(r) = repaired {
+                    // the repair passed the checks, so one of the two does
+                    if let Ok((r, q)) = settle(r) {
+                        return Ok((r, Some(q)));
                     }
                 }
+                reasons.push(format!("{name}: {e}"));
             }
             Err(FillError::Timeout) => return Err(FillError::Timeout),
             Err(FillError::Failed(e)) => reasons.push(format!("{name}: {e}")),
@@ -426,10 +455,27 @@ mod tests {
             .unwrap();
         assert!(fixed.new_vertices.len() < patch.new_vertices.len());
         assert!(fixed.new_vertices.iter().all(|p| p.z.abs() < 1e-12));
-        // a patch that passes is returned unchanged by the wrapper
+        // a patch that passes is returned by the wrapper relaxed as the dispatcher
+        // would, with the quality of its checks
         let variants = [("policy", policy.clone()), ("again", policy.clone())];
-        let good = crate::fill::min_area_fair::fill(&ctx).unwrap();
-        let got = first_passing(&ctx, &variants, crate::fill::min_area_fair::fill).unwrap();
+        let mut good = crate::fill::min_area_fair::fill(&ctx).unwrap();
+        tangential_relax(
+            &mesh,
+            &hole,
+            &mut good,
+            policy.fair.tangential_relax,
+            RELAX_STEP,
+        );
+        let (got, q) =
+            first_passing_at(&ctx, &variants, |_, c| crate::fill::min_area_fair::fill(c)).unwrap();
         assert_eq!(got, good);
+        assert_eq!(
+            q,
+            Some(
+                checker
+                    .check_patch(&mesh, &hole.vertices, &good, &policy.checks)
+                    .unwrap()
+            )
+        );
     }
 }
