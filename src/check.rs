@@ -26,13 +26,13 @@
 //!   (as the union of its edges).
 
 use crate::bvh::{boxes_meet, tri_box, Bvh};
+use crate::fasthash::{HashMap, HashSet};
 use crate::fill::geom;
 use crate::fill::Patch;
 use crate::mesh::{Mesh, VertexId};
 use crate::policy::Checks;
 use crate::report::PatchQuality;
 use glam::DVec3;
-use std::collections::{HashMap, HashSet};
 
 /// Why a patch was rejected.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -535,7 +535,8 @@ pub fn check_topology(mesh: &Mesh, hole: &[VertexId], patch: &Patch) -> Result<(
     if let Some(p) = patch.new_vertices.iter().position(|p| !p.is_finite()) {
         return err(format!("new vertex {p} has a non-finite coordinate"));
     }
-    let mut directed: HashSet<(u32, u32)> = HashSet::with_capacity(patch.triangles.len() * 3);
+    let mut directed: HashSet<(u32, u32)> =
+        HashSet::with_capacity_and_hasher(patch.triangles.len() * 3, Default::default());
     for (ti, t) in patch.triangles.iter().enumerate() {
         if t.iter().any(|&i| i as usize >= n) {
             return err(format!("triangle {ti} has an index out of range"));
@@ -622,7 +623,7 @@ pub fn check_topology(mesh: &Mesh, hole: &[VertexId], patch: &Patch) -> Result<(
         return err(format!("vertex {i} is not connected to the hole's loop"));
     }
     // every vertex must have a single fan (no pinched vertex inside the patch)
-    let mut by_vertex: HashMap<u32, Vec<(u32, u32)>> = HashMap::new();
+    let mut by_vertex: HashMap<u32, Vec<(u32, u32)>> = HashMap::default();
     for t in &patch.triangles {
         for c in 0..3 {
             by_vertex
@@ -697,7 +698,7 @@ pub fn quality(pos: &[DVec3], k: usize, patch: &Patch) -> PatchQuality {
     let valence6_share = if nnew == 0 {
         None
     } else {
-        let mut nb: Vec<HashSet<u32>> = vec![HashSet::new(); nnew];
+        let mut nb: Vec<HashSet<u32>> = vec![HashSet::default(); nnew];
         for t in &patch.triangles {
             for c in 0..3 {
                 let v = t[c] as usize;

@@ -16,6 +16,7 @@
 
 pub mod bvh;
 pub mod check;
+pub mod fasthash;
 pub mod fill;
 pub mod io;
 pub mod mesh;

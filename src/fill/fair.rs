@@ -39,12 +39,12 @@
 //! factorisation or a non-finite result is `FillError::Failed`.
 
 use super::{geom, FillError, Hole, Patch};
+use crate::fasthash::HashMap;
 use crate::mesh::{Mesh, VertexId};
 use crate::policy::{Fair, Weights};
 use faer::linalg::solvers::Solve;
 use faer::Mat;
 use glam::DVec3;
-use std::collections::HashMap;
 
 /// A piece of triangle mesh on which the fairing operator is built.
 #[derive(Clone, Debug, Default)]
@@ -89,7 +89,8 @@ fn build_operator(local: &LocalMesh, weights: Weights, norm: Normalization) -> O
     let n = local.positions.len();
     let p = &local.positions;
     // per undirected edge: sum of cotangents of the opposite angles
-    let mut cot: HashMap<(u32, u32), f64> = HashMap::with_capacity(local.triangles.len() * 3);
+    let mut cot: HashMap<(u32, u32), f64> =
+        HashMap::with_capacity_and_hasher(local.triangles.len() * 3, Default::default());
     let mut degenerate = vec![false; n];
     let mut area = vec![0.0f64; n];
     for t in &local.triangles {
@@ -460,14 +461,14 @@ pub fn local_from_patch(mesh: &Mesh, hole: &Hole, patch: &Patch, continuity: u8)
     let mut free = vec![false; k];
     free.resize(k + nn, true);
     let mut triangles = patch.triangles.clone();
-    let mut map: HashMap<VertexId, u32> = HashMap::new();
+    let mut map: HashMap<VertexId, u32> = HashMap::default();
     for (i, &v) in hole.vertices.iter().enumerate() {
         map.insert(v, i as u32);
     }
     if continuity >= 2 {
         // mesh vertices within continuity - 2 rings of the boundary
         let mut ring: Vec<VertexId> = hole.vertices.clone();
-        let mut seen: std::collections::HashSet<VertexId> = ring.iter().copied().collect();
+        let mut seen: crate::fasthash::HashSet<VertexId> = ring.iter().copied().collect();
         let mut centres: Vec<VertexId> = ring.clone();
         for _ in 0..(continuity - 2) {
             let mut next = Vec::new();
@@ -481,7 +482,7 @@ pub fn local_from_patch(mesh: &Mesh, hole: &Hole, patch: &Patch, continuity: u8)
             centres.extend_from_slice(&next);
             ring = next;
         }
-        let mut faces = std::collections::HashSet::new();
+        let mut faces = crate::fasthash::HashSet::default();
         for &v in &centres {
             for f in mesh.topo.vertex_faces(v) {
                 faces.insert(f);

@@ -86,12 +86,13 @@
 //! this closes every hole; before, homer's folded hole 3 and a bunny hole failed.
 
 use super::{geom, FillContext, FillError, Patch};
+use crate::fasthash::HashSet;
 use crate::mesh::{Mesh, VertexId};
 use faer::linalg::solvers::Solve;
 use faer::sparse::{SparseColMat, Triplet};
 use faer::{Mat, Side};
 use glam::{DQuat, DVec3};
-use std::collections::{BTreeMap, HashSet};
+use std::collections::BTreeMap;
 
 /// `x > 0`, false for NaN.
 #[inline]
@@ -163,7 +164,7 @@ fn min_area_start(ctx: &FillContext) -> Result<Patch, FillError> {
     let pts = ctx.boundary_positions();
     let forbidden = super::min_area_fair::forbidden_chords(ctx.mesh, &ctx.hole.vertices);
     let outside = super::min_area_fair::outside_normals(ctx.mesh, &ctx.hole.vertices);
-    let mut faces = HashSet::new();
+    let mut faces = HashSet::default();
     for &v in &ctx.hole.vertices {
         faces.extend(ctx.mesh.topo.vertex_faces(v));
     }
@@ -338,8 +339,8 @@ fn is_sound(boundary: &[DVec3], old: &[DVec3], new: &[DVec3], triangles: &[[u32;
         }
         normals.push(geom::tri_normal_raw(a, b, c).normalize_or_zero());
     }
-    let mut by_edge: std::collections::HashMap<(u32, u32), usize> =
-        std::collections::HashMap::new();
+    let mut by_edge: crate::fasthash::HashMap<(u32, u32), usize> =
+        crate::fasthash::HashMap::default();
     for (ti, t) in triangles.iter().enumerate() {
         for c in 0..3 {
             let key = ukey(t[c], t[(c + 1) % 3]);
@@ -641,11 +642,11 @@ impl Front {
             pos = project_loop(&pos, &normals)?;
             nacc = vec![DVec3::Z; k];
         }
-        let mut index = std::collections::HashMap::new();
+        let mut index = crate::fasthash::HashMap::default();
         for (i, &v) in hole.iter().enumerate() {
             index.insert(v, i as u32);
         }
-        let mut edges = HashSet::new();
+        let mut edges = HashSet::default();
         for (i, &v) in hole.iter().enumerate() {
             for w in mesh.topo.neighbors(v) {
                 if let Some(&j) = index.get(&w) {
@@ -655,12 +656,13 @@ impl Front {
             edges.insert(ukey(i as u32, ((i + 1) % k) as u32));
         }
         let mut obstacles = Vec::new();
-        let mut seen = HashSet::new();
+        let mut seen = HashSet::default();
         if planar {
             // the loop is the only obstacle; every front edge is checked
             seen.extend((0..mesh.num_faces()).map(crate::mesh::FaceId::from_idx));
         }
-        let mut other: std::collections::HashMap<VertexId, u32> = std::collections::HashMap::new();
+        let mut other: crate::fasthash::HashMap<VertexId, u32> =
+            crate::fasthash::HashMap::default();
         for &v in hole {
             for f in mesh.topo.vertex_faces(v) {
                 if !seen.insert(f) {
@@ -826,7 +828,7 @@ impl Front {
             return Err(FillError::Failed("the loop passes a vertex twice".into()));
         }
         let pts: Vec<DVec3> = lp.iter().map(|&v| self.pos[v as usize]).collect();
-        let mut forbidden = HashSet::new();
+        let mut forbidden = HashSet::default();
         for i in 0..m {
             for j in i + 2..m {
                 if (i, j) != (0, m - 1) && self.edges.contains(&ukey(lp[i], lp[j])) {
@@ -1302,7 +1304,8 @@ fn cot_laplacian(
 
 /// The training samples: positions and Laplacians of rings `1..=rings` around `hole`.
 pub fn training_set(mesh: &Mesh, hole: &[VertexId], rings: usize) -> (Vec<DVec3>, Vec<DVec3>) {
-    let mut ring_of: std::collections::HashMap<VertexId, usize> = std::collections::HashMap::new();
+    let mut ring_of: crate::fasthash::HashMap<VertexId, usize> =
+        crate::fasthash::HashMap::default();
     for &v in hole {
         ring_of.insert(v, 0);
     }
@@ -1477,7 +1480,8 @@ pub struct Ring {
 impl Ring {
     /// Collects the mesh faces around the loop `hole`.
     pub fn new(mesh: &Mesh, hole: &[VertexId]) -> Ring {
-        let mut label: std::collections::HashMap<VertexId, u32> = std::collections::HashMap::new();
+        let mut label: crate::fasthash::HashMap<VertexId, u32> =
+            crate::fasthash::HashMap::default();
         for (i, &v) in hole.iter().enumerate() {
             label.insert(v, i as u32);
         }
@@ -1775,7 +1779,7 @@ mod tests {
                 (ca - centre).length().total_cmp(&(cb - centre).length())
             })
             .unwrap();
-        let mut seen = HashSet::new();
+        let mut seen = HashSet::default();
         assert!(
             lp.iter().all(|v| seen.insert(*v)),
             "test hole must be a simple loop"

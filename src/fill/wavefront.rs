@@ -108,6 +108,7 @@ pub mod residual;
 pub mod retry;
 
 use super::{FillContext, FillError, Patch};
+use crate::fasthash::{HashMap, HashSet};
 use crate::policy::{Policy, Wavefront, WavefrontPlacement};
 use crate::report::PatchQuality;
 use glam::DVec3;
@@ -115,7 +116,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use robust::{orient2d, orient3d, Coord, Coord3D};
 use std::cmp::{Ordering, Reverse};
-use std::collections::{BinaryHeap, HashMap, HashSet};
+use std::collections::BinaryHeap;
 use std::f64::consts::{FRAC_PI_4, PI, TAU};
 
 /// A new triangle must face the processed vertex's expected normal at least this much
@@ -378,7 +379,7 @@ impl Grid {
     fn new(cell: f64) -> Grid {
         Grid {
             inv: 1.0 / cell,
-            cells: HashMap::new(),
+            cells: HashMap::default(),
         }
     }
     fn key(&self, p: DVec3) -> (i64, i64, i64) {
@@ -613,7 +614,7 @@ impl Wave {
         let mesh = ctx.mesh;
         let hole = &ctx.hole.vertices;
         let k = hole.len();
-        let mut index: HashMap<u32, u32> = HashMap::with_capacity(k);
+        let mut index: HashMap<u32, u32> = HashMap::with_capacity_and_hasher(k, Default::default());
         for (i, v) in hole.iter().enumerate() {
             if v.idx() >= mesh.num_vertices() {
                 return Err(FillError::Failed(format!(
@@ -662,8 +663,8 @@ impl Wave {
             acc: vec![DVec3::ZERO; k],
             pos,
             tris: Vec::new(),
-            edges: HashSet::new(),
-            mesh_edges: HashSet::new(),
+            edges: HashSet::default(),
+            mesh_edges: HashSet::default(),
             nodes: Vec::with_capacity(2 * k),
             front_size: vec![k],
             heap: BinaryHeap::new(),
@@ -691,7 +692,7 @@ impl Wave {
             max_area,
         };
         // mesh faces around the hole: expected normals (Eq. 1) and obstacles
-        let mut seen = HashSet::new();
+        let mut seen = HashSet::default();
         for (i, &v) in hole.iter().enumerate() {
             for nb in mesh.topo.neighbors(v) {
                 if let Some(&j) = index.get(&(nb.idx() as u32)) {
@@ -948,7 +949,7 @@ impl Wave {
                 )));
             }
             let pts: Vec<DVec3> = verts.iter().map(|&v| self.pos[v as usize]).collect();
-            let mut forbidden = HashSet::new();
+            let mut forbidden = HashSet::default();
             for i in 0..n {
                 for j in i + 2..n {
                     if (i, j) != (0, n - 1) && self.edge_exists(verts[i], verts[j]) {
@@ -1551,7 +1552,8 @@ impl Wave {
             let a = super::geom::angles(p[0], p[1], p[2]);
             a[0].min(a[1]).min(a[2])
         };
-        let mut owner: HashMap<(u32, u32), usize> = HashMap::with_capacity(self.tris.len() * 3);
+        let mut owner: HashMap<(u32, u32), usize> =
+            HashMap::with_capacity_and_hasher(self.tris.len() * 3, Default::default());
         for (i, t) in self.tris.iter().enumerate() {
             for c in 0..3 {
                 owner.insert((t[c], t[(c + 1) % 3]), i);

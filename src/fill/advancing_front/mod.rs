@@ -98,12 +98,13 @@ mod intersect;
 mod tests;
 
 use super::{geom, FillContext, FillError, Patch};
+use crate::fasthash::HashMap;
 use crate::mesh::VertexId;
 use glam::DVec3;
 use improve::FxSet;
 use intersect::{Grid, Obstacles};
 use std::cmp::Ordering;
-use std::collections::{BinaryHeap, HashMap};
+use std::collections::BinaryHeap;
 use std::f64::consts::PI;
 
 /// Smallest angle (degrees) a step may create (at least the checks' minimum).
@@ -373,7 +374,8 @@ impl<'a> Builder<'a> {
         if pos.iter().any(|q| !q.is_finite()) {
             return failed("hole has a vertex with a non-finite coordinate");
         }
-        let mut index: HashMap<VertexId, u32> = HashMap::with_capacity(k);
+        let mut index: HashMap<VertexId, u32> =
+            HashMap::with_capacity_and_hasher(k, Default::default());
         for (i, &v) in hole.iter().enumerate() {
             if index.insert(v, i as u32).is_some() {
                 return failed(format!("the loop visits vertex {v} twice"));

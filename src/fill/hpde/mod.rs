@@ -104,11 +104,12 @@ mod topology;
 mod tests;
 
 use super::{FillContext, FillError, Patch};
+use crate::fasthash::HashMap;
 use crate::mesh::{Mesh, VertexId};
 use glam::DVec3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use std::collections::{BTreeSet, HashMap};
+use std::collections::BTreeSet;
 
 /// Fills the hole with HPDE (see the module documentation): the policy's settings
 /// first; when their patch fails the checks (after a local repair by edge flips), the

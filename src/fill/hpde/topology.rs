@@ -3,11 +3,11 @@
 
 use super::super::FillError;
 use super::predict::{fit_plane, Predicted, Segmentation};
+use crate::fasthash::HashMap;
 use crate::fill::geom::newell_normal;
 use glam::{DVec2, DVec3};
 use robust::{orient2d, Coord};
 use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
-use std::collections::HashMap;
 
 /// Projection of 3D points to the triangulation plane.
 #[derive(Clone, Debug)]
@@ -372,7 +372,7 @@ pub fn triangulate(
     // keep predicted points inside, away from the loop and from each other
     let cell = drop_dist.max(1e-300);
     let key = |q: DVec2| ((q.x / cell).floor() as i64, (q.y / cell).floor() as i64);
-    let mut grid: HashMap<(i64, i64), Vec<DVec2>> = HashMap::new();
+    let mut grid: HashMap<(i64, i64), Vec<DVec2>> = HashMap::default();
     let mut kept: Vec<(DVec2, DVec3)> = Vec::new();
     for pr in pts {
         let (q, p) = (proj.project_predicted(pr), pr.pos);

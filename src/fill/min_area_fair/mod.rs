@@ -31,16 +31,16 @@ pub mod refine;
 pub mod triangulate;
 
 use super::{fair, FillContext, FillError, Patch};
+use crate::fasthash::{HashMap, HashSet};
 use crate::mesh::{Mesh, VertexId};
 use glam::DVec3;
-use std::collections::{HashMap, HashSet};
 
 /// Loop chords `(a, b)`, `a < b`, that are existing mesh edges (loop edges excluded).
 pub fn forbidden_chords(mesh: &Mesh, lp: &[VertexId]) -> HashSet<(u32, u32)> {
     let k = lp.len();
     let index: HashMap<VertexId, u32> =
         lp.iter().enumerate().map(|(i, &v)| (v, i as u32)).collect();
-    let mut out = HashSet::new();
+    let mut out = HashSet::default();
     for (i, &v) in lp.iter().enumerate() {
         for w in mesh.topo.neighbors(v) {
             if let Some(&j) = index.get(&w) {

@@ -27,8 +27,8 @@
 //! was there); loop vertices never move.
 
 use super::super::{Deadline, FillError};
+use crate::fasthash::HashSet;
 use glam::DVec3;
-use std::collections::{HashMap, HashSet};
 use std::hash::{BuildHasherDefault, Hasher};
 
 /// A fast hasher for the small integer keys of the edge map (the default SipHash
@@ -53,7 +53,7 @@ impl Hasher for EdgeHasher {
     }
 }
 
-type EdgeMap = HashMap<(u32, u32), u32, BuildHasherDefault<EdgeHasher>>;
+type EdgeMap = std::collections::HashMap<(u32, u32), u32, BuildHasherDefault<EdgeHasher>>;
 
 /// The patch during refinement.
 pub struct Refiner<'a> {

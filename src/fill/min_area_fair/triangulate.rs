@@ -31,10 +31,10 @@
 //!   until the pieces are small enough for the exhaustive search.
 
 use super::super::{Deadline, FillError};
+use crate::fasthash::{HashMap, HashSet};
 use crate::policy::TriangulationWeight;
 use glam::DVec3;
 use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
-use std::collections::{HashMap, HashSet};
 
 /// Largest polygon the exhaustive search handles (its tables are O(n²)).
 pub const EXACT_MAX: usize = 600;
@@ -307,7 +307,7 @@ fn cdt_candidates(inp: &LoopInput) -> Option<Vec<(u32, u32)>> {
     let vh = |i: usize| spade::handles::FixedVertexHandle::from_index(i);
     // seed faces: the inner side of every loop edge
     let mut inside: HashSet<spade::handles::FixedFaceHandle<spade::handles::InnerTag>> =
-        HashSet::new();
+        HashSet::default();
     let mut stack = Vec::new();
     for i in 0..k {
         let e = cdt.get_edge_from_neighbors(vh(i), vh((i + 1) % k))?;
@@ -332,7 +332,7 @@ fn cdt_candidates(inp: &LoopInput) -> Option<Vec<(u32, u32)>> {
             }
         }
     }
-    let mut cand: HashSet<(u32, u32)> = HashSet::new();
+    let mut cand: HashSet<(u32, u32)> = HashSet::default();
     let key = |a: usize, b: usize| (a.min(b) as u32, a.max(b) as u32);
     for &f in &inside {
         let face = cdt.face(f);
@@ -387,7 +387,7 @@ fn restricted(inp: &LoopInput) -> Result<Option<Vec<[u32; 3]>>, FillError> {
     }
     chords.sort_by_key(|&(a, b)| (b - a, a));
     let mut best: HashMap<(u32, u32), (W, u32)> =
-        HashMap::with_capacity(chords.len() * 2 + k as usize);
+        HashMap::with_capacity_and_hasher(chords.len() * 2 + k as usize, Default::default());
     for a in 0..k - 1 {
         best.insert((a, a + 1), (W::ZERO, u32::MAX));
     }
@@ -559,7 +559,7 @@ mod tests {
     /// Every loop edge once in loop direction, every other edge once each way.
     fn assert_disk(k: usize, tris: &[[u32; 3]]) {
         assert_eq!(tris.len(), k - 2);
-        let mut dir = HashSet::new();
+        let mut dir = HashSet::default();
         for t in tris {
             for c in 0..3 {
                 assert!(dir.insert((t[c], t[(c + 1) % 3])), "edge used twice");
@@ -585,7 +585,7 @@ mod tests {
             DVec3::new(2.0, 0.0, 0.0),
             DVec3::new(1.0, 1.0, 0.0),
         ];
-        let f = HashSet::new();
+        let f = HashSet::default();
         let o = vec![None; 4];
         let t = triangulate(&input(&pts, &f, &o, 60)).unwrap();
         assert_disk(4, &t);
@@ -609,7 +609,7 @@ mod tests {
     #[test]
     fn forbidden_chord_is_avoided() {
         let pts = circle(6, 0.0);
-        let mut f = HashSet::new();
+        let mut f = HashSet::default();
         f.insert((0, 3));
         f.insert((1, 4));
         let o = vec![None; 6];
@@ -622,7 +622,7 @@ mod tests {
             }
         }
         // all three long diagonals forbidden and the fans too: still possible?
-        let mut f = HashSet::new();
+        let mut f = HashSet::default();
         for (a, b) in [
             (0, 2),
             (0, 3),
@@ -641,7 +641,7 @@ mod tests {
 
     #[test]
     fn restricted_and_divided_searches_give_disks() {
-        let f = HashSet::new();
+        let f = HashSet::default();
         for (k, wob) in [(100, 0.0), (250, 0.2), (1000, 0.0), (1000, 0.3)] {
             let pts = circle(k, wob);
             let o = vec![None; k];
@@ -657,7 +657,7 @@ mod tests {
     fn restricted_matches_exact_area_on_a_planar_convex_loop() {
         // on a planar convex loop every triangulation has the same area
         let pts = circle(80, 0.0);
-        let f = HashSet::new();
+        let f = HashSet::default();
         let o = vec![None; 80];
         let t = triangulate(&input(&pts, &f, &o, 60)).unwrap();
         let area: f64 = t

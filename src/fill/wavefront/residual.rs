@@ -14,9 +14,9 @@
 
 use super::super::min_area_fair::{refine::Refiner, triangulate};
 use super::super::{fair, Deadline, FillError};
+use crate::fasthash::{HashMap, HashSet};
 use crate::policy::Policy;
 use glam::DVec3;
-use std::collections::{HashMap, HashSet};
 
 /// Relaxation rounds of the refined residual (as `min_area_fair` does before fairing).
 const RELAX_ROUNDS: usize = 8;
@@ -94,12 +94,12 @@ fn fair_interior(
     let mut positions: Vec<DVec3> = pos.to_vec();
     let mut free = vec![false; n];
     free.resize(pos.len(), true);
-    let mut index: HashMap<(u64, u64, u64), u32> = HashMap::new();
+    let mut index: HashMap<(u64, u64, u64), u32> = HashMap::default();
     for (i, &p) in pos[..n].iter().enumerate() {
         index.entry(key(p)).or_insert(i as u32);
     }
     let mut triangles: Vec<[u32; 3]> = tris.to_vec();
-    let mut seen: HashSet<[u32; 3]> = HashSet::new();
+    let mut seen: HashSet<[u32; 3]> = HashSet::default();
     for t in context {
         let ids = t.map(|p| {
             *index.entry(key(p)).or_insert_with(|| {

@@ -14,10 +14,10 @@
 
 use super::super::{FillContext, FillError, Patch};
 use crate::check::{CheckFailure, Checker};
+use crate::fasthash::{HashMap, HashSet};
 use crate::fill::relax::{tangential_relax, RELAX_STEP};
 use crate::policy::Policy;
 use crate::report::PatchQuality;
-use std::collections::{HashMap, HashSet};
 
 /// Runs `run` under each policy of `variants` (first = the policy as given) and returns
 /// the first patch that passes the checks, else a failure listing why each variant
@@ -144,7 +144,7 @@ fn repair_by_flips(
     mut patch: Patch,
     mut err: CheckFailure,
 ) -> Option<Patch> {
-    let mut tried: HashSet<(u32, u32)> = HashSet::new();
+    let mut tried: HashSet<(u32, u32)> = HashSet::default();
     for _ in 0..REPAIR_ROUNDS {
         if ctx.deadline.check().is_err() {
             return None;
@@ -153,7 +153,7 @@ fn repair_by_flips(
         if bad.is_empty() {
             return None;
         }
-        let mut owner: HashMap<(u32, u32), usize> = HashMap::new();
+        let mut owner: HashMap<(u32, u32), usize> = HashMap::default();
         for (t, tri) in patch.triangles.iter().enumerate() {
             for c in 0..3 {
                 owner.insert((tri[c], tri[(c + 1) % 3]), t);
@@ -263,7 +263,7 @@ fn repair_by_retriangulation(
                 (0..3).map(move |c| (tri[c], tri[(c + 1) % 3]))
             })
             .collect();
-        let mut next: HashMap<u32, u32> = HashMap::new();
+        let mut next: HashMap<u32, u32> = HashMap::default();
         let mut simple = true;
         for &(a, b) in &inside {
             if !inside.contains(&(b, a)) && next.insert(a, b).is_some() {
@@ -287,7 +287,7 @@ fn repair_by_retriangulation(
             continue;
         }
         // existing edges outside the region, and mesh chords between loop vertices
-        let mut outside_edges: HashSet<(u32, u32)> = HashSet::new();
+        let mut outside_edges: HashSet<(u32, u32)> = HashSet::default();
         for (t, tri) in patch.triangles.iter().enumerate() {
             if !region.contains(&t) {
                 for c in 0..3 {
@@ -297,7 +297,7 @@ fn repair_by_retriangulation(
             }
         }
         let n = ring.len();
-        let mut forbidden = HashSet::new();
+        let mut forbidden = HashSet::default();
         for i in 0..n {
             for j in i + 2..n {
                 if (i, j) == (0, n - 1) {
