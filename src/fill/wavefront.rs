@@ -585,21 +585,84 @@ fn cross3d(ai: [Option<u32>; 3], a: &[DVec3; 3], bi: [Option<u32>; 3], b: &[DVec
     false
 }
 
+/// A new triangle of a step, prepared for the tests against the nearby triangles.
+struct Candidate {
+    ids: [Option<u32>; 3],
+    /// Projected into the tangent plane, counter-clockwise; `None` when degenerate.
+    ccw: Option<[Coord<f64>; 3]>,
+    box2: Box2,
+    box3: Box3,
+}
+
+/// A closed 2-D bounding box.
+struct Box2 {
+    lo: [f64; 2],
+    hi: [f64; 2],
+}
+
+impl Box2 {
+    fn of(t: &[Coord<f64>; 3]) -> Box2 {
+        Box2 {
+            lo: [
+                t[0].x.min(t[1].x).min(t[2].x),
+                t[0].y.min(t[1].y).min(t[2].y),
+            ],
+            hi: [
+                t[0].x.max(t[1].x).max(t[2].x),
+                t[0].y.max(t[1].y).max(t[2].y),
+            ],
+        }
+    }
+    /// False only when the boxes are apart (then no two triangles in them overlap).
+    fn meets(&self, o: &Box2) -> bool {
+        !(self.hi[0] < o.lo[0]
+            || o.hi[0] < self.lo[0]
+            || self.hi[1] < o.lo[1]
+            || o.hi[1] < self.lo[1])
+    }
+}
+
+/// A closed 3-D bounding box.
+struct Box3 {
+    lo: DVec3,
+    hi: DVec3,
+}
+
+impl Box3 {
+    fn of(t: &[DVec3; 3]) -> Box3 {
+        Box3 {
+            lo: t[0].min(t[1]).min(t[2]),
+            hi: t[0].max(t[1]).max(t[2]),
+        }
+    }
+    /// False only when the boxes are apart (then no segment of one crosses the other).
+    fn meets(&self, o: &Box3) -> bool {
+        !(self.hi.cmplt(o.lo).any() || o.hi.cmplt(self.lo).any())
+    }
+}
+
+/// The triangle counter-clockwise, or `None` when it is degenerate (exact).
+fn ccw2d(t: [Coord<f64>; 3]) -> Option<[Coord<f64>; 3]> {
+    let o = orient2d(t[0], t[1], t[2]);
+    if o > 0.0 {
+        Some(t)
+    } else if o < 0.0 {
+        Some([t[0], t[2], t[1]])
+    } else {
+        None
+    }
+}
+
 /// Do two projected triangles overlap with positive area? A degenerate first triangle
 /// counts as overlapping. Exact (separating-axis test over the six edges with `orient2d`).
 fn overlap2d(a: [Coord<f64>; 3], b: [Coord<f64>; 3]) -> bool {
-    let ccw = |t: [Coord<f64>; 3]| -> Option<[Coord<f64>; 3]> {
-        let o = orient2d(t[0], t[1], t[2]);
-        if o > 0.0 {
-            Some(t)
-        } else if o < 0.0 {
-            Some([t[0], t[2], t[1]])
-        } else {
-            None
-        }
-    };
-    let Some(a) = ccw(a) else { return true };
-    let Some(b) = ccw(b) else { return false };
+    let Some(a) = ccw2d(a) else { return true };
+    overlap2d_ccw(a, b)
+}
+
+/// [`overlap2d`] with the first triangle already counter-clockwise.
+fn overlap2d_ccw(a: [Coord<f64>; 3], b: [Coord<f64>; 3]) -> bool {
+    let Some(b) = ccw2d(b) else { return false };
     let separates = |s: &[Coord<f64>; 3], o: &[Coord<f64>; 3]| {
         (0..3).any(|e| {
             let (p, q) = (s[e], s[(e + 1) % 3]);
@@ -1518,23 +1581,49 @@ impl Wave {
                 }
             }
         }
+        // each new triangle once: projected (counter-clockwise, `None` when degenerate,
+        // which overlaps everything) and its boxes, which skip the exact tests of the
+        // nearby triangles they cannot meet (same answers, fewer predicates)
+        let cand: Vec<Candidate> = tris
+            .iter()
+            .zip(&corners)
+            .map(|(t, c)| {
+                let p2 = pr(c);
+                Candidate {
+                    ids: t.map(Some),
+                    ccw: ccw2d(p2),
+                    box2: Box2::of(&p2),
+                    box3: Box3::of(c),
+                }
+            })
+            .collect();
         let d = DVec3::splat(self.len);
         let mut near = std::mem::take(&mut self.scratch);
         self.tri_grid.query_box(lo - d, hi + d, &mut near);
         near.extend_from_slice(&self.big);
         let mut ok = true;
         'outer: for &id in &near {
-            let pl = self.placed[id as usize];
-            for (t, c) in tris.iter().zip(&corners) {
-                let ids = t.map(Some);
-                let hit = if pl.n.dot(nrm) > PROJECT_MIN {
-                    overlap2d(pr(c), pr(&pl.p))
-                } else {
-                    cross3d(ids, c, pl.ids, &pl.p)
-                };
-                if hit {
-                    ok = false;
-                    break 'outer;
+            let pl = &self.placed[id as usize];
+            if pl.n.dot(nrm) > PROJECT_MIN {
+                let q = pr(&pl.p);
+                let qb = Box2::of(&q);
+                for c in &cand {
+                    let hit = match c.ccw {
+                        None => true,
+                        Some(a) => c.box2.meets(&qb) && overlap2d_ccw(a, q),
+                    };
+                    if hit {
+                        ok = false;
+                        break 'outer;
+                    }
+                }
+            } else {
+                let pb = Box3::of(&pl.p);
+                for (c, corner) in cand.iter().zip(&corners) {
+                    if c.box3.meets(&pb) && cross3d(c.ids, corner, pl.ids, &pl.p) {
+                        ok = false;
+                        break 'outer;
+                    }
                 }
             }
         }
