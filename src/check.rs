@@ -458,10 +458,18 @@ pub fn tri_tri_plain(p: &[P3; 3], q: &[P3; 3]) -> bool {
 /// degenerate `p` is reported as intersecting whenever it shares a vertex.
 /// `q` may be degenerate (a zero-area face of the input).
 pub fn tri_tri(p: &[P3; 3], pk: &[u64; 3], q: &[P3; 3], qk: &[u64; 3]) -> bool {
-    let shared: Vec<(usize, usize)> = (0..3)
-        .flat_map(|i| (0..3).filter(move |&j| pk[i] == qk[j]).map(move |j| (i, j)))
-        .collect();
-    match shared.len() {
+    // the shared corners, without allocating (called for every candidate pair)
+    let mut shared = [(0usize, 0usize); 9];
+    let mut count = 0;
+    for i in 0..3 {
+        for j in 0..3 {
+            if pk[i] == qk[j] {
+                shared[count] = (i, j);
+                count += 1;
+            }
+        }
+    }
+    match count {
         0 => tri_tri_plain(p, q),
         1 => {
             let (i, j) = shared[0];
