@@ -17,8 +17,8 @@ mod ids;
 pub use build::BuildReport;
 pub use ids::{FaceId, HalfedgeId, VertexId};
 
+use crate::fasthash::HashMap;
 use glam::DVec3;
-use std::collections::HashMap;
 
 /// Connectivity only: faces, twins and one outgoing half-edge per vertex.
 #[derive(Clone, Debug, Default)]
@@ -175,7 +175,8 @@ impl Topology {
         if self.anchor.len() < num_vertices {
             self.anchor.resize(num_vertices, None);
         }
-        let mut open: HashMap<(VertexId, VertexId), HalfedgeId> = HashMap::new();
+        let mut open: HashMap<(VertexId, VertexId), HalfedgeId> =
+            HashMap::with_capacity_and_hasher(new.len() * 3, Default::default());
         let mut touched: Vec<VertexId> = Vec::new();
         for f in new {
             for &v in f {
@@ -185,7 +186,7 @@ impl Topology {
         touched.sort_unstable();
         touched.dedup();
         // existing directed edges around the touched vertices
-        let mut existing: HashMap<(VertexId, VertexId), HalfedgeId> = HashMap::new();
+        let mut existing: HashMap<(VertexId, VertexId), HalfedgeId> = HashMap::default();
         for &v in &touched {
             if v.idx() >= self.anchor.len() {
                 return Err(format!("vertex {v} out of range"));
