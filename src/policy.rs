@@ -375,7 +375,7 @@ impl Default for Wavefront {
             max_steps_per_vertex: 200,
             merge_distance: 0.5,
             max_boundary_vertices: 2000,
-            max_area_ratio: 2.5,
+            max_area_ratio: 2.0,
         }
     }
 }

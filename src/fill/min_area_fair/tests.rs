@@ -329,7 +329,7 @@ fn ten_thousand_vertex_loop_triangulates() {
             DVec3::new(t.cos(), t.sin(), 0.2 * (5.0 * t).sin())
         })
         .collect();
-    let forbidden = HashSet::new();
+    let forbidden = HashSet::default();
     let outside = vec![None; k];
     let input = triangulate::LoopInput {
         pts: &pts,
