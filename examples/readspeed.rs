@@ -9,9 +9,13 @@
 //!   so page faults included), the physical limit the readers are compared with,
 //! - `cat`: the file through one reused 1 MiB buffer, like `cat file > /dev/null`
 //!   (no page faults: an upper bound on what any reader can reach), and
-//! - `holefill::read` of the file (parse, checks; STL also welds corners),
+//! - `holefill::read` of the file (parse, checks; STL also welds corners): the
+//!   function `holefill fill` reads its input with (there under the policy's
+//!   limits, which change no work),
 //!
-//! each the best of several runs, and prints MB/s and the ratio read / plain.
+//! each the best of several runs, and prints MB/s and the ratio read / plain, with
+//! rayon's thread count and the load average (the OBJ reader parses in parallel, so
+//! on a shared machine its numbers depend on what other processes leave free).
 
 use glam::DVec3;
 use holefill::io::{Encoding, Format, Precision, RawMesh};
@@ -94,6 +98,17 @@ fn main() -> anyhow::Result<()> {
         "mesh: {} vertices, {} faces; best of {runs} runs after a warm-up",
         raw.positions.len(),
         raw.faces.len()
+    );
+    // The OBJ reader parses on rayon's threads, the STL reader maps memory on them:
+    // what other processes leave of the cores shows in the numbers.
+    let load = std::fs::read_to_string("/proc/loadavg")
+        .ok()
+        .and_then(|s| s.split_whitespace().next().map(str::to_string))
+        .unwrap_or_else(|| "unknown".into());
+    println!(
+        "threads: {} (rayon) on {} cores; load average (1 min): {load}",
+        rayon::current_num_threads(),
+        std::thread::available_parallelism().map_or(1, |n| n.get())
     );
     println!(
         "{:<11} {:>7} {:>11} {:>9} {:>10} {:>8} {:>12} {:>10}",

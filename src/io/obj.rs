@@ -8,34 +8,576 @@
 //! it out. This parser reads the same subset (`v`, `f`, relative indices,
 //! `v x y z r g b`, `v x y z w`) in the file's vertex order, ignores `vt`, `vn`, `o`,
 //! `g`, `s`, `usemtl`, `mtllib`, `l`, `p` and unknown records, and fans polygons.
+//!
+//! Speed: the file is read in 8 MiB blocks, each cut at newlines into pieces parsed
+//! in parallel (rayon) by a one-pass parser and appended in file order; relative
+//! indices are resolved once the vertices before a piece are counted. Whatever that
+//! parser does not take (every error, NUL bytes, stray carriage returns) is read
+//! from the start of its piece on by the plain line-by-line reader, so results,
+//! notes and errors (with their line) are always the line reader's; a test compares
+//! the two on generated files.
 
 use super::text::{has_nul, parse_coord, parse_f64, parse_i64, show, strip_comment, tokens};
-use super::text::{Lines, Next, MAX_LINE};
+use super::text::{Lines, Next, MAX_LINE, UTF8_BOM};
 use super::{io_error, malformed, unit_color, Caps, IoError, Precision, RawMesh, MAX_ELEMENTS};
 use glam::DVec3;
-use std::io::{BufRead, Write};
+use rayon::prelude::*;
+use std::io::{BufRead, Read, Write};
 use std::path::Path;
 
-/// Reads an OBJ file.
-pub(crate) fn read<R: BufRead>(path: &Path, reader: R, caps: &Caps) -> Result<RawMesh, IoError> {
-    let mut lines = Lines::new(reader);
-    let mut raw = RawMesh {
-        precision: Precision::F64,
-        ..RawMesh::default()
-    };
-    let mut colors: Vec<[f32; 3]> = Vec::new();
-    let mut uncolored = 0usize;
-    let mut polygons = 0u64;
-    let mut w_scaled = 0u64;
-    let mut skipped_lp = 0u64;
-    // Largest positive index seen that referred past the vertices read so far
-    // (forward references are resolved at the end), with its line.
-    let mut forward: Option<(u64, usize)> = None;
+/// Bytes read from the file at a time; each block is cut at its last newline and
+/// parsed in pieces in parallel.
+const BLOCK: usize = 8 << 20;
+/// Target size of the pieces a block is parsed in (each cut at a newline).
+const PIECE: usize = 512 << 10;
 
+/// What the reader has gathered so far: everything the line-by-line reader keeps
+/// between lines, so that it can take over at any line the parallel reader reached.
+struct State {
+    raw: RawMesh,
+    colors: Vec<[f32; 3]>,
+    uncolored: usize,
+    polygons: u64,
+    w_scaled: u64,
+    skipped_lp: u64,
+    /// Largest positive index seen that referred past the vertices read so far
+    /// (forward references are resolved at the end), with its line.
+    forward: Option<(u64, usize)>,
+}
+
+impl State {
+    fn new() -> State {
+        State {
+            raw: RawMesh {
+                precision: Precision::F64,
+                ..RawMesh::default()
+            },
+            colors: Vec::new(),
+            uncolored: 0,
+            polygons: 0,
+            w_scaled: 0,
+            skipped_lp: 0,
+            forward: None,
+        }
+    }
+}
+
+/// Reads an OBJ file.
+///
+/// The file is read in blocks of [`BLOCK`] bytes; each block is cut at newlines into
+/// pieces that are parsed in parallel ([`Piece::parse`]) and appended in file order
+/// ([`State::append`]), indices relative to the vertices read so far resolved with
+/// the count of the vertices before the piece. A piece the fast parser does not take
+/// (any error, and lines it leaves to the line reader) and everything after it are
+/// read by the line-by-line reader ([`read_lines`]) from the state reached, so the
+/// result, notes and errors (with their line) are those of the line reader.
+pub(crate) fn read<R: BufRead>(path: &Path, reader: R, caps: &Caps) -> Result<RawMesh, IoError> {
+    read_in_blocks(path, reader, caps, BLOCK, PIECE)
+}
+
+fn read_in_blocks<R: BufRead>(
+    path: &Path,
+    mut reader: R,
+    caps: &Caps,
+    block: usize,
+    piece: usize,
+) -> Result<RawMesh, IoError> {
+    let mut st = State::new();
+    let mut buf: Vec<u8> = Vec::new();
+    // The pieces' buffers, reused from block to block.
+    let mut pool: Vec<Piece> = Vec::new();
+    // Lines before buf[0].
+    let mut line = 0usize;
+    let mut eof = false;
+    loop {
+        // Fill the buffer to `block` bytes (it holds the unfinished last line of the
+        // previous block).
+        let mut io_err = None;
+        if !eof && buf.len() < block {
+            let want = (block - buf.len()) as u64;
+            match (&mut reader).take(want).read_to_end(&mut buf) {
+                Ok(k) => eof = (k as u64) < want,
+                Err(e) => io_err = Some(e),
+            }
+        }
+        let last_block = eof || io_err.is_some();
+        let cut = if eof {
+            buf.len()
+        } else {
+            match memchr::memrchr(b'\n', &buf) {
+                Some(i) => i + 1,
+                // A line longer than a block (or a read error inside the first
+                // line of the block): the line reader takes over.
+                None => 0,
+            }
+        };
+        if cut == 0 && !eof {
+            if let Some(e) = io_err {
+                return Err(io_error(path, e));
+            }
+            let mut lines = Lines::starting_at(buf.as_slice().chain(reader), line);
+            read_lines(path, &mut lines, caps, &mut st)?;
+            return finish(path, st);
+        }
+        let bytes = buf.get(..cut).unwrap_or(&buf);
+        let ranges = split_pieces(bytes, piece);
+        if pool.len() < ranges.len() {
+            pool.resize_with(ranges.len(), Piece::default);
+        }
+        let work = pool.get_mut(..ranges.len()).unwrap_or_default();
+        let parse = |(p, &(a, b)): (&mut Piece, &(usize, usize))| {
+            p.parse(bytes.get(a..b).unwrap_or(&[]), line == 0 && a == 0)
+        };
+        let ok: Vec<bool> = if ranges.len() > 1 {
+            work.par_iter_mut().zip(&ranges).map(parse).collect()
+        } else {
+            work.iter_mut().zip(&ranges).map(parse).collect()
+        };
+        for ((&(a, _), p), ok) in ranges.iter().zip(pool.iter_mut()).zip(ok) {
+            let taken = if ok {
+                st.append(p, line, caps)
+            } else {
+                Err(())
+            };
+            match taken {
+                Ok(n) => line += n,
+                Err(()) => {
+                    // The line reader takes over at the start of this piece.
+                    let rest = buf.get(a..cut).unwrap_or(&[]);
+                    if let Some(e) = io_err {
+                        read_lines(path, &mut Lines::starting_at(rest, line), caps, &mut st)?;
+                        return Err(io_error(path, e));
+                    }
+                    let rest = buf.get(a..).unwrap_or(&[]);
+                    let mut lines = Lines::starting_at(rest.chain(reader), line);
+                    read_lines(path, &mut lines, caps, &mut st)?;
+                    return finish(path, st);
+                }
+            }
+        }
+        if let Some(e) = io_err {
+            return Err(io_error(path, e));
+        }
+        if last_block {
+            return finish(path, st);
+        }
+        buf.drain(..cut);
+    }
+}
+
+/// Splits `bytes` (whole lines) into pieces of about `piece` bytes, each ending
+/// just after a newline (the last one at the end of `bytes`).
+fn split_pieces(bytes: &[u8], piece: usize) -> Vec<(usize, usize)> {
+    let mut out = Vec::with_capacity(bytes.len() / piece.max(1) + 1);
+    let mut a = 0;
+    while a < bytes.len() {
+        let target = a.saturating_add(piece.max(1));
+        let b = if target >= bytes.len() {
+            bytes.len()
+        } else {
+            match bytes.get(target..).and_then(|t| memchr::memchr(b'\n', t)) {
+                Some(i) => target + i + 1,
+                None => bytes.len(),
+            }
+        };
+        out.push((a, b));
+        a = b;
+    }
+    out
+}
+
+/// A corner index of a face as a piece reads it.
+#[derive(Clone, Copy)]
+enum Corner {
+    /// 0-based index into the file's vertices.
+    Abs(u32),
+    /// A relative (negative) index resolved against the piece's own vertices: the
+    /// index is this plus the number of vertices before the piece (negative when it
+    /// refers to a vertex of an earlier piece).
+    Rel(i64),
+}
+
+/// What [`Piece::parse`] read from a piece of whole lines.
+#[derive(Default)]
+struct Piece {
+    positions: Vec<DVec3>,
+    /// Colours of the vertices with colour, in order.
+    colors: Vec<[f32; 3]>,
+    uncolored: usize,
+    faces: Vec<[u32; 3]>,
+    /// Corners (`3 * face + k`) holding a relative index, and that index resolved
+    /// against the piece's vertices.
+    rel: Vec<(usize, i64)>,
+    polygons: u64,
+    w_scaled: u64,
+    skipped_lp: u64,
+    /// Largest positive (0-based) index and the piece line (1-based) where it first
+    /// appears.
+    max_index: Option<(u64, usize)>,
+    lines: usize,
+}
+
+impl Piece {
+    /// Parses a piece of whole lines into `self` (cleared first) the way
+    /// [`read_lines`] does; false (and `self` left in any state) on anything that
+    /// [`read_lines`] must decide: every error, a NUL byte, a carriage return other
+    /// than the one of a CRLF ending, a piece over [`MAX_LINE`] / 2. `at_start`: the
+    /// piece starts the file (a byte order mark is skipped).
+    fn parse(&mut self, bytes: &[u8], at_start: bool) -> bool {
+        self.clear();
+        self.parse_lines(bytes, at_start).is_some()
+    }
+
+    fn clear(&mut self) {
+        self.positions.clear();
+        self.colors.clear();
+        self.uncolored = 0;
+        self.faces.clear();
+        self.rel.clear();
+        self.polygons = 0;
+        self.w_scaled = 0;
+        self.skipped_lp = 0;
+        self.max_index = None;
+        self.lines = 0;
+    }
+
+    fn parse_lines(&mut self, bytes: &[u8], at_start: bool) -> Option<()> {
+        if bytes.len() as u64 > MAX_LINE / 2 {
+            return None;
+        }
+        let mut bytes = bytes;
+        if at_start {
+            bytes = bytes.strip_prefix(UTF8_BOM).unwrap_or(bytes);
+        }
+        if memchr::memchr3(0, b'\r', b'#', bytes).is_none() {
+            // Without NUL, CR or '#' anywhere, the lines are parsed in place.
+            let mut i = 0;
+            while i < bytes.len() {
+                self.lines += 1;
+                i = self.line(bytes, i)?;
+            }
+            return Some(());
+        }
+        let mut rest = bytes;
+        while !rest.is_empty() {
+            let (mut line, next) = match memchr::memchr(b'\n', rest) {
+                Some(i) => (rest.get(..i)?, rest.get(i + 1..)?),
+                None => (rest, &[][..]),
+            };
+            rest = next;
+            self.lines += 1;
+            if let Some(t) = line.strip_suffix(b"\r") {
+                line = t;
+            }
+            if let Some(i) = memchr::memchr3(0, b'\r', b'#', line) {
+                if line.get(i) != Some(&b'#') || line.contains(&0) || line.contains(&b'\r') {
+                    return None;
+                }
+                line = line.get(..i)?;
+            }
+            self.line(line, 0)?;
+        }
+        Some(())
+    }
+}
+
+/// Token separators inside a line: ASCII whitespace ([`tokens`] splits at it) but
+/// the newline, which ends the line (a carriage return never reaches here).
+fn is_space(b: u8) -> bool {
+    b == b' ' || b == b'\t' || b == b'\x0C'
+}
+
+/// Ends a token: a separator, the newline or the end of the line.
+fn ends_token(b: Option<&u8>) -> bool {
+    match b {
+        None => true,
+        Some(&b) => b == b'\n' || is_space(b),
+    }
+}
+
+/// The index of the first byte at or after `i` that is not a separator.
+fn skip_space(b: &[u8], mut i: usize) -> usize {
+    while b.get(i).is_some_and(|&c| is_space(c)) {
+        i += 1;
+    }
+    i
+}
+
+/// The index of the end of the token starting at `i`.
+fn token_end(b: &[u8], mut i: usize) -> usize {
+    while !ends_token(b.get(i)) {
+        i += 1;
+    }
+    i
+}
+
+impl Piece {
+    /// The line starting at `b[i]` (it ends at a newline or at the end of `b`);
+    /// the index after it, `None` on any error.
+    fn line(&mut self, b: &[u8], i: usize) -> Option<usize> {
+        let start = skip_space(b, i);
+        let end = token_end(b, start);
+        let i = match b.get(start..end)? {
+            b"v" => self.vertex(b, end)?,
+            b"f" | b"fo" => self.face(b, end)?,
+            kw => {
+                if kw == b"l" || kw == b"p" {
+                    self.skipped_lp += 1;
+                }
+                match b.get(end..).and_then(|t| memchr::memchr(b'\n', t)) {
+                    Some(k) => end + k,
+                    None => b.len(),
+                }
+            }
+        };
+        // `i` is at the newline or the end.
+        Some(i + 1)
+    }
+
+    /// The numbers of a `v` line from `b[i]`; the index of its end.
+    fn vertex(&mut self, b: &[u8], mut i: usize) -> Option<usize> {
+        let mut vals = [0.0f64; 6];
+        let mut n = 0usize;
+        loop {
+            i = skip_space(b, i);
+            if ends_token(b.get(i)) {
+                break;
+            }
+            let v = real(b, &mut i).filter(|v| v.is_finite())?;
+            *vals.get_mut(n)? = v;
+            n += 1;
+        }
+        let [x, y, z, a, bb, c] = vals;
+        let mut p = DVec3::new(x, y, z);
+        match n {
+            3 => self.uncolored += 1,
+            4 => {
+                if a == 0.0 {
+                    return None;
+                }
+                if a != 1.0 {
+                    p /= a;
+                    self.w_scaled += 1;
+                    if !p.is_finite() {
+                        return None;
+                    }
+                }
+                self.uncolored += 1;
+            }
+            6 => self.colors.push([a as f32, bb as f32, c as f32]),
+            _ => return None,
+        }
+        self.positions.push(p);
+        Some(i)
+    }
+
+    /// The indices of an `f` line from `b[i]`; the index of its end.
+    fn face(&mut self, b: &[u8], mut i: usize) -> Option<usize> {
+        let nv = self.positions.len() as i64;
+        let mut first = Corner::Abs(0);
+        let mut prev = Corner::Abs(0);
+        let mut count = 0usize;
+        loop {
+            i = skip_space(b, i);
+            if ends_token(b.get(i)) {
+                break;
+            }
+            let k = index(b, &mut i)?;
+            let c = if k > 0 {
+                let i = (k - 1) as u64;
+                if i >= MAX_ELEMENTS {
+                    return None;
+                }
+                if self.max_index.map_or(true, |(m, _)| i > m) {
+                    self.max_index = Some((i, self.lines));
+                }
+                Corner::Abs(i as u32)
+            } else if k < 0 {
+                Corner::Rel(nv + k)
+            } else {
+                return None;
+            };
+            count += 1;
+            match count {
+                1 => first = c,
+                2 => prev = c,
+                _ => {
+                    let f = self.faces.len();
+                    let mut face = [0u32; 3];
+                    for (k, (slot, c)) in face.iter_mut().zip([first, prev, c]).enumerate() {
+                        match c {
+                            Corner::Abs(i) => *slot = i,
+                            Corner::Rel(r) => self.rel.push((3 * f + k, r)),
+                        }
+                    }
+                    self.faces.push(face);
+                    prev = c;
+                }
+            }
+        }
+        if count < 3 {
+            return None;
+        }
+        if count > 3 {
+            self.polygons += 1;
+        }
+        Some(i)
+    }
+}
+
+/// The vertex index of the face token at `b[*i]` (the part before a `/`), read as
+/// [`parse_i64`] reads it; `*i` moves to the end of the token.
+fn index(b: &[u8], i: &mut usize) -> Option<i64> {
+    let neg = match b.get(*i) {
+        Some(b'-') => {
+            *i += 1;
+            true
+        }
+        Some(b'+') => {
+            *i += 1;
+            false
+        }
+        _ => false,
+    };
+    let start = *i;
+    // Accumulate negatively so that i64::MIN parses.
+    let mut v: i64 = 0;
+    while let Some(&d) = b.get(*i).filter(|d| d.is_ascii_digit()) {
+        v = v.checked_mul(10)?.checked_sub(i64::from(d - b'0'))?;
+        *i += 1;
+    }
+    if *i == start {
+        return None;
+    }
+    match b.get(*i) {
+        Some(b'/') => *i = token_end(b, *i),
+        c if ends_token(c) => {}
+        _ => return None,
+    }
+    if neg {
+        Some(v)
+    } else {
+        v.checked_neg()
+    }
+}
+
+/// The real number of the token at `b[*i]`, exactly as [`parse_f64`]
+/// (`str::parse::<f64>`) reads it; `*i` moves to the end of the token.
+///
+/// Plain decimals `[+-]digits[.digits]` of at most 19 digits whose digits, read as
+/// an integer `m`, are at most 2^53 and that have at most 22 digits after the point
+/// are read in one pass by Clinger's fast path: `m` and `10^k` are exact `f64`s, so
+/// the one IEEE division `m / 10^k` is the correctly rounded value, the one the
+/// standard library (correctly rounded, and taking the same path) returns. Every
+/// other token goes to [`parse_f64`].
+fn real(b: &[u8], i: &mut usize) -> Option<f64> {
+    let start = *i;
+    let mut j = start;
+    let neg = b.get(j) == Some(&b'-');
+    if neg || b.get(j) == Some(&b'+') {
+        j += 1;
+    }
+    let mut m = 0u64;
+    let int = j;
+    while let Some(d) = b.get(j).map(|c| c.wrapping_sub(b'0')).filter(|&d| d <= 9) {
+        m = m.wrapping_mul(10).wrapping_add(u64::from(d));
+        j += 1;
+    }
+    let int_digits = j - int;
+    let mut frac_digits = 0;
+    let mut dot_ok = true;
+    if b.get(j) == Some(&b'.') {
+        j += 1;
+        let frac = j;
+        while let Some(d) = b.get(j).map(|c| c.wrapping_sub(b'0')).filter(|&d| d <= 9) {
+            m = m.wrapping_mul(10).wrapping_add(u64::from(d));
+            j += 1;
+        }
+        frac_digits = j - frac;
+        dot_ok = frac_digits > 0;
+    }
+    if ends_token(b.get(j))
+        && int_digits > 0
+        && dot_ok
+        && int_digits + frac_digits <= 19
+        && m <= 1 << 53
+    {
+        if let Some(&p) = POW10.get(frac_digits) {
+            *i = j;
+            let v = m as f64 / p;
+            return Some(if neg { -v } else { v });
+        }
+    }
+    let end = token_end(b, start);
+    *i = end;
+    parse_f64(b.get(start..end)?)
+}
+
+/// Powers of ten exactly representable as `f64`.
+const POW10: [f64; 23] = [
+    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
+    1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
+];
+
+impl State {
+    /// Appends a piece that starts after `line` lines; its number of lines, or
+    /// `Err` when the piece cannot be taken as read (a cap reached, a relative index
+    /// before the first vertex): the line reader then reads it.
+    fn append(&mut self, p: &mut Piece, line: usize, caps: &Caps) -> Result<usize, ()> {
+        let nv = self.raw.positions.len();
+        let nf = self.raw.faces.len();
+        if (nv + p.positions.len()) as u64 > caps.vertices()
+            || (nf + p.faces.len()) as u64 > caps.faces()
+        {
+            return Err(());
+        }
+        let faces = &mut p.faces;
+        for &(corner, r) in &p.rel {
+            let i = u32::try_from(r + nv as i64).map_err(|_| ())?;
+            let slot = faces
+                .get_mut(corner / 3)
+                .and_then(|f| f.get_mut(corner % 3));
+            *slot.ok_or(())? = i;
+        }
+        // The line reader's forward reference: the first line with the largest index.
+        if let Some((i, l)) = p.max_index {
+            if self.forward.map_or(true, |(m, _)| i > m) && i >= nv as u64 {
+                self.forward = Some((i, line + l));
+            }
+        }
+        self.raw.positions.extend_from_slice(&p.positions);
+        self.raw.faces.extend_from_slice(faces);
+        // Colours decide only through: any vertex with colour, the count of those
+        // without, and (when all have one) the colours in order.
+        self.colors.extend_from_slice(&p.colors);
+        self.uncolored += p.uncolored;
+        self.polygons += p.polygons;
+        self.w_scaled += p.w_scaled;
+        self.skipped_lp += p.skipped_lp;
+        Ok(p.lines)
+    }
+}
+
+/// The line-by-line reader: reads `lines` to the end into `st`.
+fn read_lines<R: BufRead>(
+    path: &Path,
+    lines: &mut Lines<R>,
+    caps: &Caps,
+    st: &mut State,
+) -> Result<(), IoError> {
+    let State {
+        raw,
+        colors,
+        uncolored,
+        polygons,
+        w_scaled,
+        skipped_lp,
+        forward,
+    } = st;
     loop {
         let (ln, line) = match lines.next_line(MAX_LINE).map_err(|e| io_error(path, e))? {
             Next::Line(ln, l) => (ln, l),
-            Next::Eof => break,
+            Next::Eof => return Ok(()),
             Next::Bad(ln, why) => return Err(malformed(path, Some(ln), why)),
         };
         let bad = |msg: String| malformed(path, Some(ln), msg);
@@ -66,7 +608,7 @@ pub(crate) fn read<R: BufRead>(path: &Path, reader: R, caps: &Caps) -> Result<Ra
                 let [x, y, z, a, b, c] = vals;
                 let mut p = DVec3::new(x, y, z);
                 match n {
-                    3 => uncolored += 1,
+                    3 => *uncolored += 1,
                     4 => {
                         // Homogeneous coordinate w.
                         if a == 0.0 {
@@ -74,12 +616,12 @@ pub(crate) fn read<R: BufRead>(path: &Path, reader: R, caps: &Caps) -> Result<Ra
                         }
                         if a != 1.0 {
                             p /= a;
-                            w_scaled += 1;
+                            *w_scaled += 1;
                             if !p.is_finite() {
                                 return Err(bad("vertex overflows when divided by w".into()));
                             }
                         }
-                        uncolored += 1;
+                        *uncolored += 1;
                     }
                     6 => {
                         if colors.len() < raw.positions.len() {
@@ -122,7 +664,7 @@ pub(crate) fn read<R: BufRead>(path: &Path, reader: R, caps: &Caps) -> Result<Ra
                         return Err(bad(format!("vertex index {k} out of range")));
                     }
                     if i >= nv && forward.map_or(true, |(m, _)| (i as u64) > m) {
-                        forward = Some((i as u64, ln));
+                        *forward = Some((i as u64, ln));
                     }
                     let i = i as u32;
                     count += 1;
@@ -144,15 +686,27 @@ pub(crate) fn read<R: BufRead>(path: &Path, reader: R, caps: &Caps) -> Result<Ra
                     )));
                 }
                 if count > 3 {
-                    polygons += 1;
+                    *polygons += 1;
                 }
             }
-            Some(b"l") | Some(b"p") => skipped_lp += 1,
+            Some(b"l") | Some(b"p") => *skipped_lp += 1,
             // vt, vn, vp, o, g, s, usemtl, mtllib, comments and unknown records.
             _ => {}
         }
     }
+}
 
+/// The checks and notes after the last line.
+fn finish(path: &Path, st: State) -> Result<RawMesh, IoError> {
+    let State {
+        mut raw,
+        mut colors,
+        uncolored,
+        polygons,
+        w_scaled,
+        skipped_lp,
+        forward,
+    } = st;
     let n = raw.positions.len() as u64;
     if let Some((i, ln)) = forward {
         if i >= n {
@@ -241,6 +795,9 @@ pub(crate) fn write<W: Write>(w: &mut W, raw: &RawMesh) -> std::io::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::io::ReadLimits;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
 
     fn parse(s: &str) -> Result<RawMesh, IoError> {
         read(Path::new("t.obj"), s.as_bytes(), &Caps::none())
@@ -303,5 +860,353 @@ mod tests {
     #[test]
     fn repeated_index_is_not_an_error() {
         assert!(parse("v 0 0 0\nv 1 0 0\nf 1 2 2\n").is_ok());
+    }
+
+    /// The line-by-line reader over the whole file: the reference the block reader
+    /// is compared with.
+    fn read_serial(src: &[u8], caps: &Caps) -> Result<RawMesh, IoError> {
+        let mut st = State::new();
+        read_lines(Path::new("t.obj"), &mut Lines::new(src), caps, &mut st)?;
+        finish(Path::new("t.obj"), st)
+    }
+
+    /// Same result, bit for bit (coordinates and colours by their bits, faces,
+    /// notes, and the error text with its line).
+    fn same(a: &Result<RawMesh, IoError>, b: &Result<RawMesh, IoError>) -> Result<(), String> {
+        match (a, b) {
+            (Ok(a), Ok(b)) => {
+                let bits = |m: &RawMesh| -> Vec<u64> {
+                    m.positions
+                        .iter()
+                        .flat_map(|p| p.to_array())
+                        .map(f64::to_bits)
+                        .collect()
+                };
+                let cbits = |m: &RawMesh| -> Option<Vec<u32>> {
+                    m.colors
+                        .as_ref()
+                        .map(|c| c.iter().flatten().map(|v| v.to_bits()).collect())
+                };
+                if bits(a) != bits(b) {
+                    return Err("positions differ".into());
+                }
+                if cbits(a) != cbits(b) {
+                    return Err("colours differ".into());
+                }
+                if a.faces != b.faces {
+                    return Err("faces differ".into());
+                }
+                if a.notes != b.notes || a.precision != b.precision || a.encoding != b.encoding {
+                    return Err(format!("notes differ: {:?} vs {:?}", a.notes, b.notes));
+                }
+                Ok(())
+            }
+            (Err(a), Err(b)) if a.to_string() == b.to_string() => Ok(()),
+            (a, b) => Err(format!(
+                "{:?} vs {:?}",
+                a.as_ref().map(|m| m.faces.len()).map_err(|e| e.to_string()),
+                b.as_ref().map(|m| m.faces.len()).map_err(|e| e.to_string())
+            )),
+        }
+    }
+
+    /// A number as OBJ writers print it, in one of many forms (most of them plain
+    /// decimals, which take the fast path).
+    fn number(rng: &mut ChaCha8Rng) -> String {
+        let v: f64 = rng.random_range(-2.0..2.0) * 10f64.powi(rng.random_range(-3..4));
+        match rng.random_range(0..12) {
+            0 => format!("{}", v as f32),
+            1 => format!("{v:e}"),
+            2 => format!("{}", rng.random_range(-50i32..50)),
+            3 => format!("{v:.25}"),
+            4 => format!("+{}", v.abs()),
+            5 => format!("{}.", rng.random_range(0..100)),
+            6 => format!(".{}", rng.random_range(0..100)),
+            7 => "-0".into(),
+            8 => format!("{}", rng.random::<f64>() * 1e-300),
+            9 => format!("9007199254740993.{}", rng.random_range(0..9)),
+            _ => format!("{v}"),
+        }
+    }
+
+    /// A random OBJ file with what files in the wild hold: a byte order mark, CRLF
+    /// or mixed line ends, comments (whole lines and after data), blank lines,
+    /// ignored records, `w` and colour vertices, polygons, `v/vt/vn` corners,
+    /// relative and forward indices, odd whitespace; with `bad`, one malformed line.
+    fn random_obj(rng: &mut ChaCha8Rng, bad: bool) -> Vec<u8> {
+        let mut out = Vec::new();
+        if rng.random_bool(0.2) {
+            out.extend_from_slice(UTF8_BOM);
+        }
+        let crlf = rng.random_range(0..3); // 0: LF, 1: CRLF, 2: mixed
+        let colour = rng.random_range(0..4); // 0: none, 1: all, 2: some, 3: 0..255
+        let lines = rng.random_range(1..120);
+        let bad_at = rng.random_range(0..lines);
+        let mut nv = 0i64;
+        for l in 0..lines {
+            let mut line = String::new();
+            let sp = |rng: &mut ChaCha8Rng| match rng.random_range(0..8) {
+                0 => "\t",
+                1 => "  ",
+                2 => " \x0C",
+                _ => " ",
+            };
+            if rng.random_bool(0.05) {
+                line.push_str(sp(rng));
+            }
+            match rng.random_range(0..20) {
+                0..=6 => {
+                    line.push('v');
+                    for _ in 0..3 {
+                        line.push_str(sp(rng));
+                        line.push_str(&number(rng));
+                    }
+                    let extra = match colour {
+                        1 => 3,
+                        2 if rng.random_bool(0.5) => 3,
+                        3 => 3,
+                        _ if rng.random_bool(0.05) => 1,
+                        _ => 0,
+                    };
+                    for _ in 0..extra {
+                        line.push_str(sp(rng));
+                        if extra == 1 {
+                            line.push_str(&format!("{}", rng.random_range(1..4) as f64 * 0.5));
+                        } else if colour == 3 {
+                            line.push_str(&format!("{}", rng.random_range(0..256)));
+                        } else {
+                            line.push_str(&format!("{}", rng.random::<f32>()));
+                        }
+                    }
+                    nv += 1;
+                }
+                7..=13 if nv > 0 => {
+                    line.push_str(if rng.random_bool(0.05) { "fo" } else { "f" });
+                    let n = if rng.random_bool(0.8) {
+                        3
+                    } else {
+                        rng.random_range(4..7)
+                    };
+                    for _ in 0..n {
+                        line.push_str(sp(rng));
+                        let i = rng.random_range(0..nv);
+                        let idx = match rng.random_range(0..10) {
+                            0..=2 => -(nv - i),
+                            3 => nv + rng.random_range(1..4), // forward
+                            _ => i + 1,
+                        };
+                        line.push_str(&idx.to_string());
+                        match rng.random_range(0..6) {
+                            0 => line.push_str("/1"),
+                            1 => line.push_str("//2"),
+                            2 => line.push_str("/3/4"),
+                            _ => {}
+                        }
+                    }
+                }
+                14 => line.push_str("# a comment"),
+                15 => {}
+                16 => line.push_str(
+                    ["vt 0 1", "vn 0 0 1", "o part", "g grp", "s off", "usemtl m"]
+                        [rng.random_range(0..6)],
+                ),
+                17 => line.push_str(["l 1 2", "p 1"][rng.random_range(0..2)]),
+                _ => line.push_str("v 1 2 3"),
+            }
+            if line == "v 1 2 3" {
+                if colour == 1 || colour == 3 {
+                    line.push_str(" 0.5 0.5 0.5");
+                }
+                nv += 1;
+            }
+            if rng.random_bool(0.05) {
+                line.push_str(sp(rng));
+            }
+            if rng.random_bool(0.05) {
+                line.push_str(" # after data");
+            }
+            if bad && l == bad_at {
+                line = [
+                    "f 0 1 2",
+                    "f -999999 1 2",
+                    "f 1 2",
+                    "f 1 2 x",
+                    "f 1 2 99999999999999999999",
+                    "f 1 2 4294967297",
+                    "v 0 0 nan",
+                    "v 0 inf 0",
+                    "v 1 2",
+                    "v 1 2 3 4 5",
+                    "v 1 2 3 4 5 6 7",
+                    "v 1 2 3 0",
+                    "v 1e308 1 1 1e-308",
+                    "v 1 2 3\u{0}",
+                    "v 1 2\r3",
+                    "v 1,5 2 3",
+                    "f 1/ 2 3/",
+                    "f 999999 1 1",
+                ][rng.random_range(0..18)]
+                .to_string();
+            }
+            out.extend_from_slice(line.as_bytes());
+            if l + 1 < lines || rng.random_bool(0.7) {
+                let cr = crlf == 1 || (crlf == 2 && rng.random_bool(0.5));
+                out.extend_from_slice(if cr { b"\r\n" } else { b"\n" });
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn block_reader_matches_line_reader() {
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let mut fast_ok = 0;
+        let mut errors = 0;
+        for case in 0..1500 {
+            let bad = case % 3 == 0;
+            let src = random_obj(&mut rng, bad);
+            let caps = match case % 10 {
+                0 => Caps::new(&ReadLimits {
+                    max_vertices: rng.random_range(1..40),
+                    ..ReadLimits::default()
+                }),
+                1 => Caps::new(&ReadLimits {
+                    max_faces: rng.random_range(1..40),
+                    ..ReadLimits::default()
+                }),
+                _ => Caps::none(),
+            };
+            let want = read_serial(&src, &caps);
+            errors += usize::from(want.is_err());
+            for (block, piece) in [
+                (BLOCK, PIECE),
+                (4096, 1),
+                (257, 64),
+                (64, 16),
+                (1 << 16, 300),
+            ] {
+                let got = read_in_blocks(Path::new("t.obj"), src.as_slice(), &caps, block, piece);
+                if let Err(why) = same(&got, &want) {
+                    panic!(
+                        "case {case}, block {block}, piece {piece}: {why}\n{}",
+                        String::from_utf8_lossy(&src)
+                    );
+                }
+            }
+            // The fast parser takes every valid file (the comparison above is not
+            // only the line reader against itself).
+            if !bad && case % 10 > 1 {
+                let mut p = Piece::default();
+                assert!(p.parse(&src, true), "{}", String::from_utf8_lossy(&src));
+                fast_ok += 1;
+            }
+        }
+        assert!(fast_ok > 500 && errors > 300, "{fast_ok} {errors}");
+    }
+
+    #[test]
+    fn real_matches_std() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let mut toks: Vec<String> = [
+            "0",
+            "-0",
+            "+0",
+            "0.0",
+            "-0.0",
+            "1.",
+            ".5",
+            "-.5",
+            "+.5",
+            ".",
+            "-",
+            "+",
+            "",
+            "1e5",
+            "1E-5",
+            "1e",
+            "e5",
+            "inf",
+            "-inf",
+            "NaN",
+            "infinity",
+            "1_0",
+            "0x10",
+            "1.2.3",
+            "9007199254740992",
+            "9007199254740993",
+            "9007199254740992.5",
+            "1234567890123456789",
+            "12345678901234567890",
+            "0.0000000000000000000001",
+            "0.00000000000000000000001",
+            "00000000000000000001.5",
+            "-1.7976931348623157e308",
+            "4.9e-324",
+            "2.2250738585072014e-308",
+            "0.1",
+            "0.2",
+            "0.3",
+            "123.456",
+            "--1",
+            "1-",
+            "1+1",
+            "١",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+        for _ in 0..20000 {
+            let v = f64::from_bits(rng.random());
+            let w: f64 = rng.random_range(-1.0..1.0) * 10f64.powi(rng.random_range(-25..25));
+            toks.push(format!("{v}"));
+            toks.push(format!("{w}"));
+            toks.push(format!("{}", w as f32));
+            toks.push(format!("{w:.prec$}", prec = rng.random_range(0..24)));
+            let digits: String = (0..rng.random_range(1..22))
+                .map(|_| char::from(b'0' + rng.random_range(0..10u8)))
+                .collect();
+            let cut = rng.random_range(0..=digits.len());
+            toks.push(format!("{}.{}", &digits[..cut], &digits[cut..]));
+        }
+        for t in &toks {
+            let mut i = 0;
+            let got = real(t.as_bytes(), &mut i);
+            let want = t.parse::<f64>().ok();
+            assert_eq!(got.map(f64::to_bits), want.map(f64::to_bits), "{t:?}");
+            assert_eq!(i, t.len(), "{t:?}");
+        }
+    }
+
+    #[test]
+    fn index_matches_parse_i64() {
+        for t in [
+            "1",
+            "-1",
+            "+1",
+            "0",
+            "-0",
+            "12/3/4",
+            "5//6",
+            "7/",
+            "-",
+            "+",
+            "/1",
+            "1a",
+            "--1",
+            "9223372036854775807",
+            "-9223372036854775808",
+            "9223372036854775808",
+            "-9223372036854775809",
+            "00012",
+            "1/x/y",
+        ] {
+            let vtok = t.split('/').next().unwrap_or(t);
+            let mut i = 0;
+            let got = index(t.as_bytes(), &mut i);
+            assert_eq!(got, parse_i64(vtok.as_bytes()), "{t:?}");
+            if got.is_some() {
+                assert_eq!(i, t.len(), "{t:?}");
+            }
+        }
     }
 }

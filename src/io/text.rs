@@ -33,10 +33,17 @@ pub(crate) enum Next<'a> {
 
 impl<R: BufRead> Lines<R> {
     pub(crate) fn new(inner: R) -> Self {
+        Self::starting_at(inner, 0)
+    }
+
+    /// A line reader whose first line is numbered `line + 1` (a reader that takes
+    /// over after `line` lines were read by other means; the byte order mark is
+    /// skipped only at line 1).
+    pub(crate) fn starting_at(inner: R, line: usize) -> Self {
         Lines {
             inner,
             buf: Vec::with_capacity(256),
-            line: 0,
+            line,
             consumed: 0,
         }
     }
