@@ -31,6 +31,12 @@ fn cases() -> Vec<Case> {
         ("round10k", || {
             holes::with_companion(holes::cylinder_end(10_000, 4))
         }),
+        ("sphere10k", || {
+            holes::with_companion(holes::dense_sphere_cap(10_000, 0.8, 3))
+        }),
+        ("sphere1k", || {
+            holes::with_companion(holes::dense_sphere_cap(1000, 0.8, 3))
+        }),
         ("slot1k", || {
             holes::with_companion(holes::cylinder_slot(48, 4, 496))
         }),
@@ -47,6 +53,10 @@ fn cases() -> Vec<Case> {
         ("sliver", || holes::sliver_hole(10.0)),
         ("flat5k", || holes::flat_annulus(5000, 3, 1e-3)),
         ("saddle", || holes::saddle(0.8, 80)),
+        ("saddle2k", || holes::saddle(0.8, 1000)),
+        ("wrap", || {
+            holes::with_companion(holes::cylinder_slot(48, 40, 1000))
+        }),
     ]
 }
 
@@ -132,6 +142,18 @@ fn main() -> anyhow::Result<()> {
             rep.timings.fill_ms / 1000.0,
             wall
         );
+        if name.starts_with("sphere") {
+            let n0 = input.positions.len();
+            let d: Vec<f64> = out.positions[n0..]
+                .iter()
+                .map(|p| holes::sphere_distance(p.to_array()))
+                .collect();
+            let worst = d.iter().copied().fold(0.0f64, f64::max);
+            let mean = d.iter().sum::<f64>() / d.len().max(1) as f64;
+            println!(
+                "   sphere: distance of the new vertices to the unit sphere: mean {mean:.2e}, largest {worst:.2e}"
+            );
+        }
         if name.starts_with("slot") {
             let n0 = input.positions.len();
             let worst = out.positions[n0..]
