@@ -21,11 +21,15 @@
 //! size of the graded band is proportional to the loop (about 3 triangles per loop
 //! vertex), so the patch stays near its budget whatever the hole.
 //!
-//! Reading of the vague parts (this is our construction, checked on flat, spherical
-//! and cylindrical holes, see the tests): the new vertices start on the plane and the
-//! caller fairs them (paper 002 §5.2, step 3), with cotangent weights taken on this
-//! flat, Delaunay layout, where they are non-negative: fairing then keeps the layout
-//! of a flat hole exactly (linear precision) and moves vertices smoothly elsewhere.
+//! Reading of the vague parts (this is our construction, checked on flat, spherical,
+//! cylindrical and saddle-shaped holes, see the tests): the new vertices start on the
+//! membrane the loop spans over its plane (the harmonic extension of the loop's
+//! heights, with the cotangent weights of the flat, Delaunay layout, where they are
+//! non-negative), and the caller fairs them (paper 002 §5.2, step 3) with weights taken
+//! on that layout. A flat hole keeps its layout exactly (linear precision); a loop that
+//! rises and falls around the hole (a saddle, whose height x² - y² is harmonic) starts
+//! on its surface, so that the fairing's weights agree with those of the mesh around
+//! it, instead of dragging vertices across the plane into folds.
 //! A chord between two loop vertices that is already a mesh edge must not appear in
 //! the patch; each such chord left by the refinement is split at its midpoint.
 
@@ -35,7 +39,7 @@ use spade::handles::{FixedFaceHandle, FixedVertexHandle, InnerTag};
 use spade::{
     AngleLimit, ConstrainedDelaunayTriangulation, Point2, RefinementParameters, Triangulation,
 };
-use std::collections::{HashMap, HashSet};
+use std::collections::HashSet;
 
 /// Parameters of the refinement.
 #[derive(Clone, Copy, Debug)]
@@ -83,31 +87,35 @@ fn project(pts: &[DVec3]) -> Option<(DVec3, DVec3, DVec3, Vec<Point2<f64>>)> {
 /// projected loop is not simple) or a loop edge is missing.
 fn inner_faces(cdt: &Cdt, k: usize, ccw: bool) -> Option<Vec<FixedFaceHandle<InnerTag>>> {
     let vh = FixedVertexHandle::from_index;
-    let mut inside: HashSet<FixedFaceHandle<InnerTag>> = HashSet::new();
-    let mut stack = Vec::new();
+    let mut inside = vec![false; cdt.num_all_faces()];
+    let mut out = Vec::new();
     for i in 0..k {
         let e = cdt.get_edge_from_neighbors(vh(i), vh((i + 1) % k))?;
         if !e.is_constraint_edge() {
             return None;
         }
         let e = if ccw { e } else { e.rev() };
-        let f = e.face().as_inner()?;
-        if inside.insert(f.fix()) {
-            stack.push(f.fix());
+        let f = e.face().as_inner()?.fix();
+        if !inside[f.index()] {
+            inside[f.index()] = true;
+            out.push(f);
         }
     }
-    while let Some(f) = stack.pop() {
+    let mut next = 0;
+    while next < out.len() {
+        let f = out[next];
+        next += 1;
         for e in cdt.face(f).adjacent_edges() {
             if e.is_constraint_edge() {
                 continue;
             }
-            let g = e.rev().face().as_inner()?;
-            if inside.insert(g.fix()) {
-                stack.push(g.fix());
+            let g = e.rev().face().as_inner()?.fix();
+            if !inside[g.index()] {
+                inside[g.index()] = true;
+                out.push(g);
             }
         }
     }
-    let mut out: Vec<_> = inside.into_iter().collect();
     out.sort_unstable_by_key(|f| f.index());
     Some(out)
 }
@@ -208,21 +216,24 @@ pub fn graded(
     let Some(faces) = faces else {
         return Ok(None);
     };
-    let mut index: HashMap<usize, u32> = HashMap::new();
+    // patch index of each triangulation vertex (loop vertex i is i; new vertices are
+    // numbered in the order the faces meet them)
+    let mut index = vec![u32::MAX; cdt.num_vertices()];
+    let mut flat = p2;
     let mut out = GradedPatch::default();
     for f in faces {
         let vs = cdt.face(f).vertices();
         let mut t = [0u32; 3];
-        for (c_, vh) in vs.iter().enumerate() {
+        for (corner, vh) in vs.iter().enumerate() {
             let i = vh.fix().index();
-            t[c_] = if i < k {
+            t[corner] = if i < k {
                 i as u32
             } else {
-                *index.entry(i).or_insert_with(|| {
-                    let p = vh.position();
-                    out.new_vertices.push(c + u * p.x + v * p.y);
-                    (k + out.new_vertices.len() - 1) as u32
-                })
+                if index[i] == u32::MAX {
+                    flat.push(vh.position());
+                    index[i] = (flat.len() - 1) as u32;
+                }
+                index[i]
             };
         }
         if !ccw {
@@ -230,7 +241,82 @@ pub fn graded(
         }
         out.triangles.push(t);
     }
+    // the new vertices start on the membrane the loop spans over its plane
+    let n = u.cross(v);
+    let heights: Vec<f64> = pts.iter().map(|&p| (p - c).dot(n)).collect();
+    let lift =
+        harmonic(&flat, &out.triangles, &heights).unwrap_or_else(|| vec![0.0; flat.len() - k]);
+    out.new_vertices = flat[k..]
+        .iter()
+        .zip(&lift)
+        .map(|(p, &h)| c + u * p.x + v * p.y + n * h)
+        .collect();
     Ok(Some(out))
+}
+
+/// Weight added to every edge of [`harmonic`]'s Laplacian, relative to a cotangent
+/// weight of order 1: keeps the system positive definite when an edge's cotangents
+/// sum to a negative value (set to zero) without changing the result measurably.
+const HARMONIC_EPS: f64 = 1e-9;
+
+/// The harmonic extension of `values` (one per loop vertex, the first `values.len()`
+/// vertices of `flat`) to the other vertices of the planar triangulation `tris` over
+/// `flat`: cotangent weights of the flat layout (negative edge sums set to zero),
+/// Dirichlet values at the loop, sparse Cholesky. `None` when the solve fails.
+fn harmonic(flat: &[Point2<f64>], tris: &[[u32; 3]], values: &[f64]) -> Option<Vec<f64>> {
+    use faer::sparse::{SparseColMat, Triplet};
+    let k = values.len();
+    let m = flat.len().checked_sub(k)?;
+    if m == 0 {
+        return Some(Vec::new());
+    }
+    // cotangent of the angle at each corner, on the edge across it
+    let mut edges: Vec<((u32, u32), f64)> = Vec::with_capacity(3 * tris.len());
+    for t in tris {
+        for corner in 0..3 {
+            let (o, a, b) = (t[corner], t[(corner + 1) % 3], t[(corner + 2) % 3]);
+            let [po, pa, pb] = [o, a, b].map(|i| flat[i as usize]);
+            let (ux, uy, vx, vy) = (pa.x - po.x, pa.y - po.y, pb.x - po.x, pb.y - po.y);
+            let cross = (ux * vy - uy * vx).abs();
+            let cot = if cross > 0.0 {
+                (ux * vx + uy * vy) / cross
+            } else {
+                0.0
+            };
+            edges.push(((a.min(b), a.max(b)), 0.5 * cot.clamp(-1e3, 1e3)));
+        }
+    }
+    edges.sort_by_key(|e| e.0);
+    let mut entries: Vec<Triplet<usize, usize, f64>> = Vec::with_capacity(4 * edges.len() / 2);
+    let mut rhs = faer::Mat::<f64>::zeros(m, 1);
+    let mut e = 0;
+    while e < edges.len() {
+        let key = edges[e].0;
+        let mut w = 0.0;
+        while e < edges.len() && edges[e].0 == key {
+            w += edges[e].1;
+            e += 1;
+        }
+        let w = w.max(0.0) + HARMONIC_EPS;
+        let (a, b) = (key.0 as usize, key.1 as usize);
+        for (i, j) in [(a, b), (b, a)] {
+            if i < k {
+                continue;
+            }
+            entries.push(Triplet::new(i - k, i - k, w));
+            if j < k {
+                rhs[(i - k, 0)] += w * values[j];
+            } else {
+                entries.push(Triplet::new(i - k, j - k, -w));
+            }
+        }
+    }
+    let mat = SparseColMat::<usize, f64>::try_new_from_triplets(m, m, &entries).ok()?;
+    let llt = mat.sp_cholesky(faer::Side::Lower).ok()?;
+    use faer::linalg::solvers::Solve;
+    let x = llt.solve(rhs.as_ref());
+    let out: Vec<f64> = (0..m).map(|i| x[(i, 0)]).collect();
+    out.iter().all(|h| h.is_finite()).then_some(out)
 }
 
 #[cfg(test)]
@@ -343,6 +429,40 @@ mod tests {
             g.triangles.len()
         );
         assert!(g.triangles.len() > k);
+    }
+
+    #[test]
+    fn new_vertices_start_on_the_membrane_of_the_loop() {
+        // a loop on the saddle z = (x² - y²) / 2: its height is harmonic, so the
+        // membrane over the unit disk is the saddle itself (up to the discretisation)
+        let k = 400;
+        let f = |x: f64, y: f64| 0.5 * (x * x - y * y);
+        let pts: Vec<DVec3> = circle(k, 1.0)
+            .into_iter()
+            .map(|p| DVec3::new(p.x, p.y, f(p.x, p.y)))
+            .collect();
+        let g = graded(&pts, &HashSet::new(), params(0.002))
+            .unwrap()
+            .expect("simple");
+        assert_oriented_disk(k, &g);
+        assert!(g.new_vertices.len() > 100);
+        let worst = g
+            .new_vertices
+            .iter()
+            .map(|p| (p.z - f(p.x, p.y)).abs())
+            .fold(0.0f64, f64::max);
+        assert!(worst < 0.005, "{worst} off the saddle (heights up to 0.5)");
+        // a loop on a tilted plane: the membrane is the plane, exactly up to rounding
+        let tilt: Vec<DVec3> = circle(k, 1.0)
+            .into_iter()
+            .map(|p| DVec3::new(p.x, p.y, 0.3 * p.x - 0.2 * p.y))
+            .collect();
+        let g = graded(&tilt, &HashSet::new(), params(0.01))
+            .unwrap()
+            .expect("simple");
+        for p in &g.new_vertices {
+            assert!((p.z - (0.3 * p.x - 0.2 * p.y)).abs() < 1e-9, "{p}");
+        }
     }
 
     #[test]
