@@ -7,10 +7,12 @@
 //! The meshes are generated (tests/common/holes.rs, shared with tests/hard_holes.rs).
 //! For each case it prints the boundary loops, then per hole: size, method, status,
 //! added faces, time; the whole fill time (what `holefill fill` prints as
-//! FILL_TIME_S); and for the cylinder slot the largest distance of a new vertex to
-//! the cylinder. The cases whose hole spans the whole part (the cylinder slot and end,
-//! the big sphere cap) get a small second part beside them, so that the default
-//! `[border]` rule does not take the hole for a scan's outer border.
+//! FILL_TIME_S); for the cylinder slots the largest distance of a new vertex to the
+//! cylinder, for the round holes on a dense sphere (`sphere1k`, `sphere10k`: a cap of
+//! 46 degrees cut along a ring of 1,000 or 10,000 vertices) the mean and largest
+//! distance to the sphere. The cases whose hole spans the whole part (the cylinder
+//! slots and ends, the big sphere caps) get a small second part beside them, so that
+//! the default `[border]` rule does not take the hole for a scan's outer border.
 
 #[path = "../tests/common/holes.rs"]
 mod holes;
@@ -31,6 +33,12 @@ fn cases() -> Vec<Case> {
         ("round10k", || {
             holes::with_companion(holes::cylinder_end(10_000, 4))
         }),
+        ("sphere10k", || {
+            holes::with_companion(holes::dense_sphere_cap(10_000, 0.8, 3))
+        }),
+        ("sphere1k", || {
+            holes::with_companion(holes::dense_sphere_cap(1000, 0.8, 3))
+        }),
         ("slot1k", || {
             holes::with_companion(holes::cylinder_slot(48, 4, 496))
         }),
@@ -47,7 +55,24 @@ fn cases() -> Vec<Case> {
         ("sliver", || holes::sliver_hole(10.0)),
         ("flat5k", || holes::flat_annulus(5000, 3, 1e-3)),
         ("saddle", || holes::saddle(0.8, 80)),
+        ("saddle2k", || holes::saddle(0.8, 1000)),
+        ("wrap", || {
+            holes::with_companion(holes::cylinder_slot(48, 40, 1000))
+        }),
     ]
+}
+
+/// CPU time (user + system) of this process so far, in seconds, from
+/// `/proc/self/stat` (clock ticks of 10 ms); `None` where that file is missing. On a
+/// machine shared with other jobs the wall clock overstates the cost, this does not.
+fn cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // fields after the command name (which is in parentheses and may hold spaces)
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    // utime and stime are fields 14 and 15 of the line, 12 and 13 after the name
+    let ticks: f64 = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
 }
 
 fn raw(s: &Soup) -> RawMesh {
@@ -95,9 +120,11 @@ fn main() -> anyhow::Result<()> {
             continue;
         }
         let input = raw(&s);
+        let cpu0 = cpu_seconds();
         let t = Instant::now();
         let (out, rep) = holefill::repair(&input, &policy)?;
         let wall = t.elapsed().as_secs_f64();
+        let cpu = cpu_seconds().zip(cpu0).map(|(b, a)| b - a);
         for h in &rep.holes {
             let tried: Vec<String> = h
                 .tried
@@ -128,10 +155,23 @@ fn main() -> anyhow::Result<()> {
             }
         }
         println!(
-            "   FILL_TIME_S={:.3}  (repair {:.3} s)",
+            "   FILL_TIME_S={:.3}  (repair {:.3} s wall, {} CPU)",
             rep.timings.fill_ms / 1000.0,
-            wall
+            wall,
+            cpu.map_or("?".to_string(), |c| format!("{c:.2} s"))
         );
+        if name.starts_with("sphere") {
+            let n0 = input.positions.len();
+            let d: Vec<f64> = out.positions[n0..]
+                .iter()
+                .map(|p| holes::sphere_distance(p.to_array()))
+                .collect();
+            let worst = d.iter().copied().fold(0.0f64, f64::max);
+            let mean = d.iter().sum::<f64>() / d.len().max(1) as f64;
+            println!(
+                "   sphere: distance of the new vertices to the unit sphere: mean {mean:.2e}, largest {worst:.2e}"
+            );
+        }
         if name.starts_with("slot") {
             let n0 = input.positions.len();
             let worst = out.positions[n0..]

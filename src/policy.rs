@@ -447,7 +447,8 @@ pub struct Limits {
     /// does not depend on it.
     pub threads: usize,
     /// Largest patch (triangles) a method builds for one hole (0: no limit):
-    /// min_area_fair coarsens its density to stay under it, the other methods give up
+    /// min_area_fair grades its density (fine along the loop, coarse inside) to stay
+    /// near half of it, the other methods give up
     /// when their estimate (or, for advancing_front, their patch) exceeds it.
     pub max_patch_triangles: usize,
 }

@@ -89,8 +89,10 @@ fn build_operator(local: &LocalMesh, weights: Weights, norm: Normalization) -> O
     let n = local.positions.len();
     let p = &local.positions;
     // per undirected edge: sum of cotangents of the opposite angles
-    let mut cot: HashMap<(u32, u32), f64> =
-        HashMap::with_capacity_and_hasher(local.triangles.len() * 3, Default::default());
+    // (collected per triangle corner, then summed per edge in triangle order: a stable
+    // sort keeps the order of the additions, so the sums are those of a map filled
+    // triangle by triangle, without the hashing, which dominated the fairing's setup)
+    let mut cot: Vec<((u32, u32), f64)> = Vec::with_capacity(local.triangles.len() * 3);
     let mut degenerate = vec![false; n];
     let mut area = vec![0.0f64; n];
     for t in &local.triangles {
@@ -126,12 +128,22 @@ fn build_operator(local: &LocalMesh, weights: Weights, norm: Normalization) -> O
             let j = t[(corner + 1) % 3];
             let k = t[(corner + 2) % 3];
             let key = (i.min(j), i.max(j));
-            *cot.entry(key).or_insert(0.0) +=
-                geom::cot_at(p[k as usize], p[i as usize], p[j as usize]);
+            cot.push((
+                key,
+                geom::cot_at(p[k as usize], p[i as usize], p[j as usize]),
+            ));
         }
     }
+    cot.sort_by_key(|e| e.0);
     let mut nbrs: Vec<Vec<(u32, f64)>> = vec![Vec::new(); n];
-    for (&(i, j), &c) in &cot {
+    let mut e = 0;
+    while e < cot.len() {
+        let (i, j) = cot[e].0;
+        let mut c = 0.0;
+        while e < cot.len() && cot[e].0 == (i, j) {
+            c += cot[e].1;
+            e += 1;
+        }
         nbrs[i as usize].push((j, c));
         nbrs[j as usize].push((i, c));
     }

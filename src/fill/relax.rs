@@ -28,7 +28,9 @@ pub fn tangential_relax(mesh: &Mesh, hole: &Hole, patch: &mut Patch, iterations:
     }
     let mut pos: Vec<DVec3> = hole.vertices.iter().map(|&v| mesh.pos(v)).collect();
     pos.extend_from_slice(&patch.new_vertices);
-    // neighbours of each new vertex (each undirected edge seen twice: dedup)
+    // neighbours of each new vertex (each undirected edge seen twice: dedup), stored
+    // one list after the other (`adj[start[j]..start[j + 1]]`), and the triangles
+    // with a new corner: the loop runs 100 times over both
     let mut nb: Vec<Vec<u32>> = vec![Vec::new(); n - k];
     for t in &patch.triangles {
         for c in 0..3 {
@@ -39,14 +41,26 @@ pub fn tangential_relax(mesh: &Mesh, hole: &Hole, patch: &mut Patch, iterations:
             }
         }
     }
-    for l in nb.iter_mut() {
+    let mut start = Vec::with_capacity(n - k + 1);
+    let mut adj = Vec::new();
+    start.push(0);
+    for mut l in nb {
         l.sort_unstable();
         l.dedup();
+        adj.extend_from_slice(&l);
+        start.push(adj.len());
     }
+    let tris: Vec<[u32; 3]> = patch
+        .triangles
+        .iter()
+        .copied()
+        .filter(|t| t.iter().any(|&i| i as usize >= k))
+        .collect();
     let mut next = pos.clone();
+    let mut normal = vec![DVec3::ZERO; n - k];
     for _ in 0..iterations {
-        let mut normal = vec![DVec3::ZERO; n - k];
-        for t in &patch.triangles {
+        normal.fill(DVec3::ZERO);
+        for t in &tris {
             let [a, b, c] = t.map(|i| pos[i as usize]);
             let fnrm = (b - a).cross(c - a);
             for &i in t {
@@ -55,7 +69,8 @@ pub fn tangential_relax(mesh: &Mesh, hole: &Hole, patch: &mut Patch, iterations:
                 }
             }
         }
-        for (j, l) in nb.iter().enumerate() {
+        for j in 0..n - k {
+            let l = &adj[start[j]..start[j + 1]];
             if l.is_empty() {
                 continue;
             }

@@ -320,6 +320,97 @@ pub fn sphere_cap(level: usize, cap: f64) -> Soup {
     })
 }
 
+/// A unit sphere with a round hole of `k` boundary vertices: the cap of polar angle
+/// below `cap` (radians) around +z is missing. The sphere is dense near the hole and
+/// coarsens away from it: `fine` rings of `k` vertices (ring spacing about the edge
+/// length), then rings whose spacing grows by half each ring (up to 0.2), zipped
+/// together, closed by a fan at the south pole. The true surface is the sphere.
+pub fn dense_sphere_cap(k: usize, cap: f64, fine: usize) -> Soup {
+    let mut s = Soup::default();
+    // rings: (polar angle, vertex count, first vertex index)
+    let mut rings: Vec<(f64, usize, usize)> = Vec::new();
+    let (mut theta, mut n) = (cap, k.max(3));
+    let mut edge = TAU * cap.sin() / n as f64;
+    let mut j = 0;
+    loop {
+        let first = s.v.len();
+        // alternate rings are rotated by half a step, so the strips zip evenly
+        let shift = if j % 2 == 0 { 0.0 } else { 0.5 };
+        for i in 0..n {
+            let phi = TAU * (i as f64 + shift) / n as f64;
+            s.v.push([
+                theta.sin() * phi.cos(),
+                theta.sin() * phi.sin(),
+                theta.cos(),
+            ]);
+        }
+        rings.push((theta, n, first));
+        j += 1;
+        if j >= fine {
+            edge = (edge * 1.5).min(0.2);
+        }
+        let next = theta + 0.87 * edge;
+        if next > std::f64::consts::PI - 0.6 * edge {
+            break;
+        }
+        theta = next;
+        if j >= fine {
+            n = ((TAU * theta.sin() / edge).round() as usize).clamp(3, n);
+        }
+    }
+    // zip consecutive rings: advance on the ring whose next vertex comes first; after
+    // n_a + n_b triangles the strip has gone once around
+    let angle = |r: &(f64, usize, usize), i: usize, j: usize| {
+        let shift = if j % 2 == 0 { 0.0 } else { 0.5 };
+        TAU * (i as f64 + shift) / r.1 as f64
+    };
+    let mut tris: Vec<[usize; 3]> = Vec::new();
+    for w in 0..rings.len() - 1 {
+        let (a, b) = (rings[w], rings[w + 1]);
+        let (mut i, mut m) = (0usize, 0usize);
+        while i < a.1 || m < b.1 {
+            let next_a = angle(&a, i + 1, w);
+            let next_b = angle(&b, m + 1, w + 1);
+            let va = a.2 + i % a.1;
+            let vb = b.2 + m % b.1;
+            if m >= b.1 || (i < a.1 && next_a <= next_b) {
+                tris.push([va, a.2 + (i + 1) % a.1, vb]);
+                i += 1;
+            } else {
+                tris.push([va, b.2 + (m + 1) % b.1, vb]);
+                m += 1;
+            }
+        }
+    }
+    let last = rings[rings.len() - 1];
+    let pole = s.v.len();
+    s.v.push([0.0, 0.0, -1.0]);
+    for i in 0..last.1 {
+        tris.push([last.2 + i, last.2 + (i + 1) % last.1, pole]);
+    }
+    // orient every triangle outward (the sphere is star-shaped about the origin)
+    for t in tris {
+        let [a, b, c] = t.map(|i| s.v[i]);
+        let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+        let v = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+        let nrm = [
+            u[1] * v[2] - u[2] * v[1],
+            u[2] * v[0] - u[0] * v[2],
+            u[0] * v[1] - u[1] * v[0],
+        ];
+        let out = nrm[0] * (a[0] + b[0] + c[0])
+            + nrm[1] * (a[1] + b[1] + c[1])
+            + nrm[2] * (a[2] + b[2] + c[2]);
+        s.f.push(if out >= 0.0 { t } else { [t[0], t[2], t[1]] });
+    }
+    s
+}
+
+/// Distance of a point to the unit sphere.
+pub fn sphere_distance(p: V3) -> f64 {
+    ((p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() - 1.0).abs()
+}
+
 /// A rectilinear spiral hole in a gently curved grid (z = 0.05 (x² + y²) on a
 /// grid of edge 1/16): arms `width` quads wide, separated by `gap` quads, `turns`
 /// quarter-turns. One loop (plus the grid's outer border).

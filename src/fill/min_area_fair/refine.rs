@@ -83,7 +83,7 @@ pub struct Refiner<'a> {
 const SLIVER_GUARD: f64 = 15.0;
 
 /// Smallest angle of a triangle (radians): the one opposite the shortest edge.
-fn min_angle(a: DVec3, b: DVec3, c: DVec3) -> f64 {
+pub fn min_angle(a: DVec3, b: DVec3, c: DVec3) -> f64 {
     let mut l = [
         (b - c).length_squared(),
         (c - a).length_squared(),
