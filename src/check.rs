@@ -461,9 +461,9 @@ pub fn tri_tri(p: &[P3; 3], pk: &[u64; 3], q: &[P3; 3], qk: &[u64; 3]) -> bool {
     // the shared corners, without allocating (called for every candidate pair)
     let mut shared = [(0usize, 0usize); 9];
     let mut count = 0;
-    for i in 0..3 {
-        for j in 0..3 {
-            if pk[i] == qk[j] {
+    for (i, a) in pk.iter().enumerate() {
+        for (j, b) in qk.iter().enumerate() {
+            if a == b {
                 shared[count] = (i, j);
                 count += 1;
             }
