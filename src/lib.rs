@@ -204,7 +204,9 @@ fn split_long_edges(mesh: &mut Mesh, factor: f64) -> usize {
     total
 }
 
-/// Finds the holes, applies the outer-border rule and fills the rest.
+/// Finds the holes, applies the outer-border rule and fills the rest. (Not inlined:
+/// profiles and instruction counts of the filling find it by name.)
+#[inline(never)]
 fn fill_all(mesh: &mut Mesh, policy: &Policy, degenerate: &mut usize) -> Vec<HoleReport> {
     let loops = mesh.topo.boundary_loops();
     let comp = components(mesh);

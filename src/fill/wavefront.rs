@@ -177,18 +177,75 @@ pub fn fill_checked(ctx: &FillContext) -> Result<(Patch, Option<PatchQuality>), 
     // after one does, only the variants that close a residual early are run
     let ran_away = std::cell::Cell::new(false);
     let full = ctx.policy.wavefront.max_steps_per_vertex;
-    retry::first_passing_at(ctx, &variants(ctx.policy), |_, c| {
+    let vars = variants(ctx.policy);
+    // the variants that are the policy with fewer steps per vertex run the policy's
+    // front up to their cap: they resume from a copy of the policy's run taken there
+    // (or, when that run ended before their cap, would repeat it)
+    let resumable: Vec<Option<usize>> = vars
+        .iter()
+        .map(|(_, p)| {
+            let mut q = p.clone();
+            q.wavefront.max_steps_per_vertex = full;
+            (q == *ctx.policy && p.wavefront.max_steps_per_vertex < full)
+                .then(|| p.wavefront.max_steps_per_vertex.saturating_mul(ctx.hole.len()))
+        })
+        .collect();
+    let caps: Vec<usize> = resumable.iter().flatten().copied().collect();
+    let first = std::cell::RefCell::new(FirstRun::default());
+    retry::first_passing_at(ctx, &vars, |at, c| {
         if ran_away.get() && c.policy.wavefront.max_steps_per_vertex >= full {
             return Err(FillError::Failed(format!(
                 "skipped: {RUNAWAY} under the policy's settings"
             )));
         }
-        let r = fill_with_stats(c).map(|(p, _)| p);
+        let r = match (at, resumable.get(at).copied().flatten()) {
+            (0, _) => {
+                let (r, snaps) = run_wave(c, Start::Fresh(&caps));
+                let mut f = first.borrow_mut();
+                f.snapshots = snaps;
+                f.outcome = Some(r.as_ref().map(|_| ()).map_err(Clone::clone));
+                r
+            }
+            (_, Some(cap)) => {
+                let (snap, outcome) = {
+                    let mut f = first.borrow_mut();
+                    let i = f.snapshots.iter().position(|(s, _)| *s == cap);
+                    (i.map(|i| f.snapshots.swap_remove(i).1), f.outcome.clone())
+                };
+                match (snap, outcome) {
+                    (Some(w), _) => run_wave(c, Start::Resume(Box::new(w))).0,
+                    // the policy's run ended within this cap: the same run again
+                    (None, Some(Err(e))) => Err(e),
+                    (None, Some(Ok(()))) => Err(FillError::Failed(
+                        "the same front as the policy's, whose patch failed the checks".into(),
+                    )),
+                    (None, None) => run_wave(c, Start::Fresh(&[])).0,
+                }
+            }
+            _ => run_wave(c, Start::Fresh(&[])).0,
+        };
+        let r = r.map(|(p, _)| p);
         if matches!(&r, Err(FillError::Failed(e)) if e.starts_with(RUNAWAY)) {
             ran_away.set(true);
         }
         r
     })
+}
+
+/// What the policy's own run left for the variants that resume it.
+#[derive(Default)]
+struct FirstRun {
+    /// Copies of its wave before step `cap` (for each cap it reached).
+    snapshots: Vec<(usize, Wave)>,
+    /// How it ended.
+    outcome: Option<Result<(), FillError>>,
+}
+
+/// Where [`run_wave`] starts: a new wave that keeps copies of itself before the given
+/// step counts, or a kept copy.
+enum Start<'a> {
+    Fresh(&'a [usize]),
+    Resume(Box<Wave>),
 }
 
 /// The policy, then the same method with the settings measured most robust on folded
@@ -262,6 +319,11 @@ pub struct Stats {
 
 /// [`fill`], also returning what the run did.
 pub fn fill_with_stats(ctx: &FillContext) -> Result<(Patch, Stats), FillError> {
+    run_wave(ctx, Start::Fresh(&[])).0
+}
+
+/// The checks before a run; `Some` patch when the loop is a triangle.
+fn precheck(ctx: &FillContext) -> Result<Option<Patch>, FillError> {
     let opts = &ctx.policy.wavefront;
     check_options(opts)?;
     let k = ctx.hole.len();
@@ -277,20 +339,50 @@ pub fn fill_with_stats(ctx: &FillContext) -> Result<(Patch, Stats), FillError> {
         )));
     }
     if k == 3 {
-        let patch = Patch {
+        return Ok(Some(Patch {
             new_vertices: Vec::new(),
             triangles: vec![[0, 1, 2]],
-        };
-        return Ok((patch, Stats::default()));
+        }));
     }
-    let mut w = Wave::new(ctx, opts, len)?;
-    w.run(ctx, opts)?;
+    Ok(None)
+}
+
+/// [`fill_with_stats`] from `start`; also returns the copies of the wave kept on the
+/// way.
+fn run_wave(
+    ctx: &FillContext,
+    start: Start,
+) -> (Result<(Patch, Stats), FillError>, Vec<(usize, Wave)>) {
+    let opts = &ctx.policy.wavefront;
+    let k = ctx.hole.len();
+    let mut w = match start {
+        Start::Fresh(at) => {
+            match precheck(ctx) {
+                Err(e) => return (Err(e), Vec::new()),
+                Ok(Some(tri)) => return (Ok((tri, Stats::default())), Vec::new()),
+                Ok(None) => {}
+            }
+            match Wave::new(ctx, opts, ctx.hole.mean_edge_length) {
+                Ok(mut w) => {
+                    w.snapshot_at = at.to_vec();
+                    w
+                }
+                Err(e) => return (Err(e), Vec::new()),
+            }
+        }
+        Start::Resume(w) => *w,
+    };
+    let r = w.run(ctx, opts);
+    let snapshots = std::mem::take(&mut w.snapshots);
+    if let Err(e) = r {
+        return (Err(e), snapshots);
+    }
     w.flip_slivers();
     let patch = Patch {
         new_vertices: w.pos[k..].to_vec(),
         triangles: w.tris,
     };
-    Ok((patch, w.stats))
+    (Ok((patch, w.stats)), snapshots)
 }
 
 fn check_options(o: &Wavefront) -> Result<(), FillError> {
@@ -370,10 +462,24 @@ struct Placed {
     n: DVec3,
 }
 
-/// A uniform spatial hash of ids.
+/// A uniform spatial hash of ids. An id is stored in every cell its box touches; a
+/// query reports each id whose cells meet the query's cells exactly once (in the
+/// first cell of the overlap), so no sorting or deduplication is needed.
+#[derive(Clone)]
 struct Grid {
     inv: f64,
-    cells: HashMap<(i64, i64, i64), Vec<u32>>,
+    cells: HashMap<u64, Vec<u32>>,
+    /// Cell box (`lo`, `hi`) of each id (indexed by id; ids not in the grid unused).
+    boxes: Vec<([i64; 3], [i64; 3])>,
+    /// The ids in the grid.
+    ids: Vec<u32>,
+}
+
+/// Cell coordinates packed into one hash key (21 bits each; a collision between far
+/// cells costs a look at more ids, never a wrong answer).
+fn cell_key(x: i64, y: i64, z: i64) -> u64 {
+    const M: i64 = (1 << 21) - 1;
+    ((x & M) as u64) | (((y & M) as u64) << 21) | (((z & M) as u64) << 42)
 }
 
 impl Grid {
@@ -381,18 +487,20 @@ impl Grid {
         Grid {
             inv: 1.0 / cell,
             cells: HashMap::default(),
+            boxes: Vec::new(),
+            ids: Vec::new(),
         }
     }
-    fn key(&self, p: DVec3) -> (i64, i64, i64) {
+    fn key(&self, p: DVec3) -> [i64; 3] {
         let f = |x: f64| (x * self.inv).floor() as i64;
-        (f(p.x), f(p.y), f(p.z))
+        [f(p.x), f(p.y), f(p.z)]
     }
-    fn span(&self, lo: DVec3, hi: DVec3) -> ((i64, i64, i64), (i64, i64, i64), i64) {
+    fn span(&self, lo: DVec3, hi: DVec3) -> ([i64; 3], [i64; 3], i64) {
         let a = self.key(lo);
         let b = self.key(hi);
-        let n = (b.0 - a.0 + 1)
-            .saturating_mul(b.1 - a.1 + 1)
-            .saturating_mul(b.2 - a.2 + 1);
+        let n = (b[0] - a[0] + 1)
+            .saturating_mul(b[1] - a[1] + 1)
+            .saturating_mul(b[2] - a[2] + 1);
         (a, b, n)
     }
     /// Inserts `id` into every cell the box touches; false when it spans too many.
@@ -401,36 +509,55 @@ impl Grid {
         if n > MAX_CELLS {
             return false;
         }
-        for x in a.0..=b.0 {
-            for y in a.1..=b.1 {
-                for z in a.2..=b.2 {
-                    self.cells.entry((x, y, z)).or_default().push(id);
+        let i = id as usize;
+        if self.boxes.len() <= i {
+            self.boxes.resize(i + 1, ([0; 3], [-1; 3]));
+        }
+        self.boxes[i] = (a, b);
+        self.ids.push(id);
+        for x in a[0]..=b[0] {
+            for y in a[1]..=b[1] {
+                for z in a[2]..=b[2] {
+                    let v = self.cells.entry(cell_key(x, y, z)).or_default();
+                    if v.last() != Some(&id) {
+                        v.push(id);
+                    }
                 }
             }
         }
         true
     }
-    /// Every id in a cell the box touches (sorted, unique).
+    /// Every id in a cell the box touches, each once (in no particular order).
     fn query_box(&self, lo: DVec3, hi: DVec3, out: &mut Vec<u32>) {
         out.clear();
         let (a, b, n) = self.span(lo, hi);
         if n > self.cells.len() as i64 || n > MAX_CELLS {
-            for ids in self.cells.values() {
-                out.extend_from_slice(ids);
-            }
-        } else {
-            for x in a.0..=b.0 {
-                for y in a.1..=b.1 {
-                    for z in a.2..=b.2 {
-                        if let Some(ids) = self.cells.get(&(x, y, z)) {
-                            out.extend_from_slice(ids);
+            out.extend_from_slice(&self.ids);
+            return;
+        }
+        for x in a[0]..=b[0] {
+            for y in a[1]..=b[1] {
+                for z in a[2]..=b[2] {
+                    let Some(ids) = self.cells.get(&cell_key(x, y, z)) else {
+                        continue;
+                    };
+                    for &id in ids {
+                        let (l, h) = self.boxes[id as usize];
+                        // the id's box holds this cell, and this is the first cell of
+                        // its overlap with the query
+                        if x == l[0].max(a[0])
+                            && y == l[1].max(a[1])
+                            && z == l[2].max(a[2])
+                            && x <= h[0]
+                            && y <= h[1]
+                            && z <= h[2]
+                        {
+                            out.push(id);
                         }
                     }
                 }
             }
         }
-        out.sort_unstable();
-        out.dedup();
     }
 }
 
@@ -447,7 +574,9 @@ struct Plan {
     chain: Vec<Item>,
 }
 
-/// The state of the front.
+/// The state of the front (cloned to resume a run with a smaller step cap, see
+/// [`fill_checked`]).
+#[derive(Clone)]
 struct Wave {
     k: usize,
     len: f64,
@@ -494,6 +623,53 @@ struct Wave {
     /// (`max_area_ratio` times the loop's vector area).
     area: f64,
     max_area: f64,
+    /// Steps taken and failed steps in a row (the state of [`Wave::run`]).
+    steps: usize,
+    stalls: usize,
+    /// Step counts at which [`Wave::run`] keeps a copy of the wave (before that step),
+    /// and the copies kept.
+    snapshot_at: Vec<usize>,
+    snapshots: Vec<(usize, Wave)>,
+}
+
+/// Is `p` inside the closed polygon `poly` (non-zero winding number, counted by the
+/// signed crossings of the ray from `p` towards +x, so no angles are summed) or within
+/// `near` of one of its edges?
+fn inside_or_near(poly: &[(f64, f64)], p: (f64, f64), near: f64) -> bool {
+    let Some(&last) = poly.last() else {
+        return false;
+    };
+    let (px, py) = p;
+    let mut wind = 0i64;
+    let mut prev = last;
+    for &cur in poly {
+        let (ax, ay) = (prev.0 - px, prev.1 - py);
+        let (bx, by) = (cur.0 - px, cur.1 - py);
+        let cross = ax * by - ay * bx;
+        if ay <= 0.0 {
+            if by > 0.0 && cross > 0.0 {
+                wind += 1;
+            }
+        } else if by <= 0.0 && cross < 0.0 {
+            wind -= 1;
+        }
+        prev = cur;
+    }
+    if wind != 0 {
+        return true;
+    }
+    let r2 = near * near;
+    let mut prev = last;
+    for &cur in poly {
+        let (ax, ay) = (prev.0 - px, prev.1 - py);
+        let (ex, ey) = (cur.0 - prev.0, cur.1 - prev.1);
+        let t = (-(ax * ex + ay * ey) / (ex * ex + ey * ey).max(1e-300)).clamp(0.0, 1.0);
+        if (ax + t * ex).powi(2) + (ay + t * ey).powi(2) < r2 {
+            return true;
+        }
+        prev = cur;
+    }
+    false
 }
 
 fn ekey(a: u32, b: u32) -> (u32, u32) {
@@ -754,6 +930,10 @@ impl Wave {
             scratch: Vec::new(),
             area: 0.0,
             max_area,
+            steps: 0,
+            stalls: 0,
+            snapshot_at: Vec::new(),
+            snapshots: Vec::new(),
         };
         // mesh faces around the hole: expected normals (Eq. 1) and obstacles
         let mut seen = HashSet::default();
@@ -919,15 +1099,22 @@ impl Wave {
         Ok(())
     }
 
+    /// Runs the front until it closes, from where it stands (a fresh wave, or a copy
+    /// kept by an earlier run: the loop's state is in the wave).
     fn run(&mut self, ctx: &FillContext, opts: &Wavefront) -> Result<(), FillError> {
         let cap = opts.max_steps_per_vertex.saturating_mul(self.k);
         let mu = opts.mu.to_radians();
         let (alpha, beta) = (opts.alpha.to_radians(), opts.beta.to_radians());
-        let mut steps = 0usize;
-        let mut stalls = 0usize;
         while !self.alive.is_empty() {
             ctx.deadline.check()?;
-            steps += 1;
+            if self.snapshot_at.contains(&self.steps) {
+                let mut copy = self.clone();
+                copy.snapshot_at.clear();
+                copy.snapshots.clear();
+                self.snapshots.push((self.steps, copy));
+            }
+            self.steps += 1;
+            let steps = self.steps;
             self.stats.steps = steps;
             if steps > cap {
                 // out of steps: close what is left as residual fronts
@@ -955,19 +1142,19 @@ impl Wave {
             }
             self.check_area(opts)?;
             if advanced {
-                stalls = 0;
+                self.stalls = 0;
                 self.relaxed = false;
             } else {
-                stalls += 1;
+                self.stalls += 1;
                 self.stats.failed_steps += 1;
                 self.penalize(node);
-                if stalls > 2 * self.alive.len() + 16 && !self.relaxed {
+                if self.stalls > 2 * self.alive.len() + 16 && !self.relaxed {
                     // stuck: accept thin triangles until the next step succeeds; the
                     // sliver flips repair them or the checks reject the patch
                     self.relaxed = true;
                     self.stats.relaxed_steps += 1;
-                    stalls = 0;
-                } else if stalls > 2 * self.alive.len() + 16 {
+                    self.stalls = 0;
+                } else if self.stalls > 2 * self.alive.len() + 16 {
                     // stuck: close every remaining front as a residual loop
                     let left = self.alive.len();
                     return self.close_residual_fronts(ctx).map_err(|e| {
@@ -1250,7 +1437,8 @@ impl Wave {
                 continue;
             }
             let dist = (self.pos[nd.vert as usize] - x).length();
-            if dist < r && best.map_or(true, |(b, _)| dist < b) {
+            // ties go to the smallest id (the query's order is arbitrary)
+            if dist < r && best.map_or(true, |(b, bid)| dist < b || (dist == b && id < bid)) {
                 best = Some((dist, id));
             }
         }
@@ -1259,29 +1447,13 @@ impl Wave {
     }
 
     /// Does `x` project (onto the loop's best-fit plane) inside the loop or within
-    /// `Avglen / 2` of it? (Winding number; points nearer the centre than every loop
-    /// vertex are inside without it.)
+    /// `Avglen / 2` of it? (Points nearer the centre than every loop vertex are inside
+    /// without a look at the loop.)
     fn inside_loop(&self, x: DVec3) -> bool {
         let d = x - self.centre;
         let (px, py) = (d.dot(self.plane_u), d.dot(self.plane_w));
-        if (px * px + py * py).sqrt() < self.inner {
-            return true;
-        }
-        let k = self.loop2d.len();
-        let mut wind = 0.0;
-        let mut near = f64::INFINITY;
-        for i in 0..k {
-            let (ax, ay) = (self.loop2d[i].0 - px, self.loop2d[i].1 - py);
-            let (bx, by) = (
-                self.loop2d[(i + 1) % k].0 - px,
-                self.loop2d[(i + 1) % k].1 - py,
-            );
-            wind += (ax * by - ay * bx).atan2(ax * bx + ay * by);
-            let (ex, ey) = (bx - ax, by - ay);
-            let t = (-(ax * ex + ay * ey) / (ex * ex + ey * ey).max(1e-300)).clamp(0.0, 1.0);
-            near = near.min(((ax + t * ex).powi(2) + (ay + t * ey).powi(2)).sqrt());
-        }
-        wind.abs() > PI || near < 0.5 * self.len
+        px * px + py * py < self.inner * self.inner
+            || inside_or_near(&self.loop2d, (px, py), 0.5 * self.len)
     }
 
     /// Is `x` within `clear` of an edge of `front` whose ends are not in `skip`, yet not
@@ -2496,5 +2668,137 @@ mod tests {
                 assert_ne!(v[i].1, v[j].1, "{} {}", v[i].0, v[j].0);
             }
         }
+    }
+
+    /// The winding count by ray crossings gives what the summed angles gave (non-zero
+    /// winding, or within `near` of an edge) on random simple and self-crossing loops.
+    #[test]
+    fn crossing_count_agrees_with_summed_angles() {
+        let reference = |poly: &[(f64, f64)], (px, py): (f64, f64), near: f64| {
+            let k = poly.len();
+            let (mut wind, mut dist) = (0.0f64, f64::INFINITY);
+            for i in 0..k {
+                let (ax, ay) = (poly[i].0 - px, poly[i].1 - py);
+                let (bx, by) = (poly[(i + 1) % k].0 - px, poly[(i + 1) % k].1 - py);
+                wind += (ax * by - ay * bx).atan2(ax * bx + ay * by);
+                let (ex, ey) = (bx - ax, by - ay);
+                let t = (-(ax * ex + ay * ey) / (ex * ex + ey * ey).max(1e-300)).clamp(0.0, 1.0);
+                dist = dist.min(((ax + t * ex).powi(2) + (ay + t * ey).powi(2)).sqrt());
+            }
+            wind.abs() > PI || dist < near
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let (mut inside, mut total) = (0, 0);
+        for round in 0..300 {
+            let k = rng.random_range(3..40);
+            let poly: Vec<(f64, f64)> = (0..k)
+                .map(|i| {
+                    if round % 3 == 0 {
+                        // anywhere: self-crossing loops, winding numbers above one
+                        (rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0))
+                    } else {
+                        let a = TAU * (i as f64 + rng.random_range(0.0..0.9)) / k as f64;
+                        let r = rng.random_range(0.2..1.0);
+                        (r * a.cos(), r * a.sin())
+                    }
+                })
+                .collect();
+            for _ in 0..50 {
+                let p = (rng.random_range(-1.2..1.2), rng.random_range(-1.2..1.2));
+                let want = reference(&poly, p, 0.05);
+                assert_eq!(inside_or_near(&poly, p, 0.05), want, "{poly:?} {p:?}");
+                inside += want as usize;
+                total += 1;
+            }
+        }
+        assert!(inside > total / 5 && inside < total * 4 / 5, "{inside} of {total}");
+    }
+
+    /// A grid query reports each id whose cells meet the query's cells exactly once
+    /// (all ids when the query spans more cells than are filled), as the brute force.
+    #[test]
+    fn grid_query_reports_every_overlap_once() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let mut g = Grid::new(0.5);
+        let mut boxes = Vec::new();
+        let mut rand_box = |rng: &mut ChaCha8Rng, size: f64| {
+            let c = DVec3::new(
+                rng.random_range(-3.0..3.0),
+                rng.random_range(-3.0..3.0),
+                rng.random_range(-3.0..3.0),
+            );
+            let h = DVec3::new(
+                rng.random_range(0.0..size),
+                rng.random_range(0.0..size),
+                rng.random_range(0.0..size),
+            );
+            (c - h, c + h)
+        };
+        for id in 0..400u32 {
+            let (lo, hi) = rand_box(&mut rng, if id % 50 == 0 { 6.0 } else { 0.6 });
+            if g.insert_box(lo, hi, id) {
+                boxes.push((id, g.key(lo), g.key(hi)));
+            }
+        }
+        assert!(boxes.len() < 400, "some boxes span too many cells");
+        let mut out = Vec::new();
+        for q in 0..300 {
+            let (lo, hi) = rand_box(&mut rng, if q % 20 == 0 { 8.0 } else { 1.0 });
+            g.query_box(lo, hi, &mut out);
+            let (a, b, n) = g.span(lo, hi);
+            let mut want: Vec<u32> = boxes
+                .iter()
+                .filter(|(_, l, h)| {
+                    n > g.cells.len() as i64
+                        || n > MAX_CELLS
+                        || (0..3).all(|i| l[i] <= b[i] && a[i] <= h[i])
+                })
+                .map(|b| b.0)
+                .collect();
+            let mut got = out.clone();
+            got.sort_unstable();
+            assert!(got.windows(2).all(|w| w[0] != w[1]), "an id twice");
+            want.sort_unstable();
+            assert_eq!(got, want);
+        }
+    }
+
+    /// A variant with fewer steps per vertex resumed from the copy the policy's run kept
+    /// at its cap gives the same patch, bit for bit, as that variant run afresh.
+    #[test]
+    fn a_resumed_run_equals_a_fresh_one() {
+        let (mesh, _) = Mesh::from_raw(&sphere(4, 0.6));
+        let policy = Policy::default();
+        let hole = Hole::new(0, &mesh, loop_near(&mesh, SPHERE_DIR.normalize()), &policy);
+        let k = hole.len();
+        assert!(k >= 20, "{k}");
+        let ctx = |policy| FillContext {
+            mesh: &mesh,
+            hole: &hole,
+            policy,
+            deadline: Deadline::none(),
+            checker: None,
+        };
+        let mut short = policy.clone();
+        short.wavefront.max_steps_per_vertex = 1;
+        let (full, mut snaps) = run_wave(&ctx(&policy), Start::Fresh(&[k]));
+        let full = full.unwrap();
+        assert!(full.1.steps > k, "the policy's run passed the cap: {:?}", full.1);
+        assert_eq!(snaps.len(), 1);
+        let (at, w) = snaps.remove(0);
+        assert_eq!(at, k);
+        let resumed = run_wave(&ctx(&short), Start::Resume(Box::new(w))).0.unwrap();
+        let fresh = run_wave(&ctx(&short), Start::Fresh(&[])).0.unwrap();
+        assert_eq!(resumed.1.residual_fronts, 1);
+        assert_eq!(resumed, fresh);
+        let bits = |p: &Patch| -> Vec<u64> {
+            p.new_vertices
+                .iter()
+                .flat_map(|v| v.to_array().map(f64::to_bits))
+                .collect()
+        };
+        assert_eq!(bits(&resumed.0), bits(&fresh.0));
+        // the same through the method: the policy's run is the full one
+        assert_eq!(fill_with_stats(&ctx(&policy)).unwrap(), full);
     }
 }
