@@ -236,10 +236,14 @@ pub fn fill_checked(ctx: &FillContext) -> Result<(Patch, Option<PatchQuality>), 
 #[derive(Default)]
 struct FirstRun {
     /// Copies of its wave before step `cap` (for each cap it reached).
-    snapshots: Vec<(usize, Wave)>,
+    snapshots: Snapshots,
     /// How it ended.
     outcome: Option<Result<(), FillError>>,
 }
+
+/// Copies of a wave kept by [`Wave::run`], with the step count before which each was
+/// taken.
+type Snapshots = Vec<(usize, Wave)>;
 
 /// Where [`run_wave`] starts: a new wave that keeps copies of itself before the given
 /// step counts, or a kept copy.
@@ -352,7 +356,7 @@ fn precheck(ctx: &FillContext) -> Result<Option<Patch>, FillError> {
 fn run_wave(
     ctx: &FillContext,
     start: Start,
-) -> (Result<(Patch, Stats), FillError>, Vec<(usize, Wave)>) {
+) -> (Result<(Patch, Stats), FillError>, Snapshots) {
     let opts = &ctx.policy.wavefront;
     let k = ctx.hole.len();
     let mut w = match start {
@@ -629,7 +633,7 @@ struct Wave {
     /// Step counts at which [`Wave::run`] keeps a copy of the wave (before that step),
     /// and the copies kept.
     snapshot_at: Vec<usize>,
-    snapshots: Vec<(usize, Wave)>,
+    snapshots: Snapshots,
 }
 
 /// Is `p` inside the closed polygon `poly` (non-zero winding number, counted by the
@@ -2674,6 +2678,7 @@ mod tests {
     /// winding, or within `near` of an edge) on random simple and self-crossing loops.
     #[test]
     fn crossing_count_agrees_with_summed_angles() {
+        use rand::Rng;
         let reference = |poly: &[(f64, f64)], (px, py): (f64, f64), near: f64| {
             let k = poly.len();
             let (mut wind, mut dist) = (0.0f64, f64::INFINITY);
@@ -2718,10 +2723,11 @@ mod tests {
     /// (all ids when the query spans more cells than are filled), as the brute force.
     #[test]
     fn grid_query_reports_every_overlap_once() {
+        use rand::Rng;
         let mut rng = ChaCha8Rng::seed_from_u64(11);
         let mut g = Grid::new(0.5);
         let mut boxes = Vec::new();
-        let mut rand_box = |rng: &mut ChaCha8Rng, size: f64| {
+        let rand_box = |rng: &mut ChaCha8Rng, size: f64| {
             let c = DVec3::new(
                 rng.random_range(-3.0..3.0),
                 rng.random_range(-3.0..3.0),
