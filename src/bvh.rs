@@ -70,7 +70,7 @@ pub struct Bvh {
 }
 
 /// Largest `f32` not above `x`.
-fn f32_down(x: f64) -> f32 {
+pub(crate) fn f32_down(x: f64) -> f32 {
     let y = x as f32;
     if (y as f64) > x {
         step_f32(y, false)
@@ -80,7 +80,7 @@ fn f32_down(x: f64) -> f32 {
 }
 
 /// Smallest `f32` not below `x`.
-fn f32_up(x: f64) -> f32 {
+pub(crate) fn f32_up(x: f64) -> f32 {
     let y = x as f32;
     if (y as f64) < x {
         step_f32(y, true)

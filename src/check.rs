@@ -25,7 +25,7 @@
 //!   may assume them non-degenerate; a zero-area face of the mesh is handled exactly
 //!   (as the union of its edges).
 
-use crate::bvh::{boxes_meet, tri_box, Bvh};
+use crate::bvh::{boxes_meet, f32_down, f32_up, tri_box, Bvh};
 use crate::fasthash::{HashMap, HashSet};
 use crate::fill::geom;
 use crate::fill::Patch;
@@ -33,6 +33,8 @@ use crate::mesh::{Mesh, VertexId};
 use crate::policy::Checks;
 use crate::report::PatchQuality;
 use glam::DVec3;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::OnceLock;
 
 /// Why a patch was rejected.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -45,20 +47,56 @@ pub enum CheckFailure {
     SelfIntersection(usize, String),
 }
 
-/// Holds what the checks need across holes: a bounding-volume hierarchy over the
-/// mesh's faces at construction, and for the faces committed since, a logarithmic
-/// set of smaller trees (Bentley-Saxe: a full tail of `TAIL` faces becomes a tree,
-/// and trees of similar size are merged), plus the short tail scanned linearly. A
-/// query costs O(log² n); each committed face is rebuilt into a tree O(log n) times.
+/// Holds what the checks need across holes. For the faces the mesh had at
+/// construction: their boxes (`f32`, rounded outwards), scanned linearly for the faces
+/// near a patch, and a bounding-volume hierarchy over them, built when many checks are
+/// expected or once the scans have cost about as much as building it
+/// ([`SCANS_BEFORE_TREE`]). For the faces committed since: a logarithmic set of smaller
+/// trees (Bentley-Saxe: a full tail of `TAIL` faces becomes a tree, and trees of similar
+/// size are merged), plus the short tail scanned linearly.
+///
+/// Every check reports the same failure whatever finds the candidates (scan or tree):
+/// the smallest failing patch triangle, and for it the smallest other triangle or mesh
+/// face it meets. So results never depend on thread timing or on when a tree was built.
 pub struct Checker {
-    /// Tree over the faces the mesh had at construction.
-    base: Bvh,
+    /// Boxes of the faces the mesh had at construction.
+    boxes: Vec<FaceBox>,
+    /// Tree over those faces, once built.
+    base: OnceLock<Bvh>,
+    /// Scans of `boxes` so far.
+    scans: AtomicUsize,
     /// Trees over committed faces, sizes decreasing.
     levels: Vec<Level>,
     /// Committed faces not yet in a tree (fewer than `TAIL`).
     tail: Vec<u32>,
-    /// First face index not yet in `base`, `levels` or `tail`.
+    /// First face index not yet in `boxes`, `levels` or `tail`.
     next_unseen: usize,
+}
+
+/// A face's box in `f32`, rounded outwards (so it holds the exact box).
+#[derive(Clone, Copy, Debug)]
+struct FaceBox {
+    lo: [f32; 3],
+    hi: [f32; 3],
+}
+
+impl FaceBox {
+    /// Meets the closed box `[lo, hi]`.
+    #[inline]
+    fn meets(&self, lo: DVec3, hi: DVec3) -> bool {
+        (self.lo[0] as f64) <= hi.x
+            && lo.x <= (self.hi[0] as f64)
+            && (self.lo[1] as f64) <= hi.y
+            && lo.y <= (self.hi[1] as f64)
+            && (self.lo[2] as f64) <= hi.z
+            && lo.z <= (self.hi[2] as f64)
+    }
+    fn as_f64(&self) -> (DVec3, DVec3) {
+        (
+            DVec3::new(self.lo[0] as f64, self.lo[1] as f64, self.lo[2] as f64),
+            DVec3::new(self.hi[0] as f64, self.hi[1] as f64, self.hi[2] as f64),
+        )
+    }
 }
 
 /// A tree over some committed faces.
@@ -77,17 +115,55 @@ impl Level {
 /// Committed faces scanned linearly before they are put in a tree.
 const TAIL: usize = 64;
 
+/// Scans of the face boxes after which the tree over them is built (a scan costs about
+/// a hundredth of the build, so this keeps the total within twice the better choice).
+pub const SCANS_BEFORE_TREE: usize = 64;
+
 impl Checker {
-    /// Prepares the checks for a mesh: builds the tree over its faces.
+    /// Prepares the checks for a mesh (the face boxes; the tree when needed).
     pub fn new(mesh: &Mesh) -> Checker {
+        Checker::for_checks(mesh, 0)
+    }
+
+    /// [`Checker::new`] for about `expected` patch checks: with more than
+    /// [`SCANS_BEFORE_TREE`] the tree is built at once (in parallel for a big mesh).
+    pub fn for_checks(mesh: &Mesh, expected: usize) -> Checker {
         let nf = mesh.num_faces();
-        let base = Bvh::build(nf, |f| face_box(mesh, f));
-        Checker {
-            base,
+        let boxes: Vec<FaceBox> = (0..nf)
+            .map(|f| {
+                let (lo, hi) = face_box(mesh, f);
+                if lo.is_finite() && hi.is_finite() {
+                    FaceBox {
+                        lo: lo.to_array().map(f32_down),
+                        hi: hi.to_array().map(f32_up),
+                    }
+                } else {
+                    // widened to everything, as the tree does: always a candidate
+                    FaceBox {
+                        lo: [f32::NEG_INFINITY; 3],
+                        hi: [f32::INFINITY; 3],
+                    }
+                }
+            })
+            .collect();
+        let c = Checker {
+            boxes,
+            base: OnceLock::new(),
+            scans: AtomicUsize::new(0),
             levels: Vec::new(),
             tail: Vec::new(),
             next_unseen: nf,
+        };
+        if expected > SCANS_BEFORE_TREE {
+            c.tree();
         }
+        c
+    }
+
+    /// The tree over the construction-time faces (built on first call).
+    fn tree(&self) -> &Bvh {
+        self.base
+            .get_or_init(|| Bvh::build(self.boxes.len(), |f| self.boxes[f].as_f64()))
     }
 
     /// Checks a patch for a hole; on success returns its quality.
@@ -163,7 +239,64 @@ impl Checker {
         self.levels.push(Level::new(mesh, faces));
     }
 
+    /// Mesh faces whose box meets `[lo, hi]`, ascending (construction-time faces with
+    /// `with_base`, always the faces added since).
+    fn candidates(&self, mesh: &Mesh, lo: DVec3, hi: DVec3, with_base: bool) -> Vec<u32> {
+        let mut out: Vec<u32> = Vec::new();
+        if with_base {
+            let n = self.scans.fetch_add(1, Ordering::Relaxed);
+            match self.base.get() {
+                Some(t) => t.query(lo, hi, |f| {
+                    if self.boxes[f].meets(lo, hi) {
+                        out.push(f as u32);
+                    }
+                    false
+                }),
+                None if n >= SCANS_BEFORE_TREE => self.tree().query(lo, hi, |f| {
+                    if self.boxes[f].meets(lo, hi) {
+                        out.push(f as u32);
+                    }
+                    false
+                }),
+                None => {
+                    out.extend(
+                        self.boxes
+                            .iter()
+                            .enumerate()
+                            .filter(|(_, b)| b.meets(lo, hi))
+                            .map(|(f, _)| f as u32),
+                    );
+                    false
+                }
+            };
+        }
+        let meets = |f: usize| {
+            let (a, b) = face_box(mesh, f);
+            boxes_meet(lo, hi, a, b) || !(a.is_finite() && b.is_finite())
+        };
+        for l in &self.levels {
+            l.tree.query(lo, hi, |j| {
+                let f = l.faces[j] as usize;
+                if meets(f) {
+                    out.push(f as u32);
+                }
+                false
+            });
+        }
+        out.extend(self.tail.iter().copied().filter(|&f| meets(f as usize)));
+        out.extend(
+            (self.next_unseen..mesh.num_faces())
+                .filter(|&f| meets(f))
+                .map(|f| f as u32),
+        );
+        out.sort_unstable();
+        out
+    }
+
     /// The self-intersection check (see [`tri_tri`] for the rules on shared vertices).
+    /// The failure reported is the smallest failing patch triangle `i`: first against
+    /// the other patch triangles (with `against_base`; the smallest other one it meets),
+    /// then against the mesh faces (the smallest face it meets).
     fn check_intersections(
         &self,
         mesh: &Mesh,
@@ -173,6 +306,9 @@ impl Checker {
         against_base: bool,
     ) -> Result<(), CheckFailure> {
         let k = hole.len();
+        if patch.triangles.is_empty() {
+            return Ok(());
+        }
         let keys: Vec<u64> = (0..pos.len())
             .map(|i| {
                 if i < k {
@@ -188,60 +324,67 @@ impl Checker {
             .map(|t| (t.map(|i| pos[i as usize]), t.map(|i| keys[i as usize])))
             .collect();
         let boxes: Vec<(DVec3, DVec3)> = tris.iter().map(|(p, _)| tri_box(p)).collect();
+        let (plo, phi) = boxes.iter().fold(
+            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(lo, hi), b| (lo.min(b.0), hi.max(b.1)),
+        );
+        let near = self.candidates(mesh, plo, phi, against_base);
+        if !against_base && near.is_empty() {
+            return Ok(());
+        }
+        let ptree = Bvh::build(tris.len(), |i| boxes[i]);
         // patch against patch
-        // (already done when the patch was checked against the base)
-        let ptree = if against_base {
-            Bvh::build(tris.len(), |i| boxes[i])
-        } else {
-            Bvh::default()
-        };
-        for (i, (p, pk)) in tris.iter().enumerate().filter(|_| against_base) {
-            let mut hit = None;
-            ptree.query(boxes[i].0, boxes[i].1, |j| {
-                if j > i && boxes_meet(boxes[i].0, boxes[i].1, boxes[j].0, boxes[j].1) {
-                    let (q, qk) = &tris[j];
-                    if tri_tri(p, pk, q, qk) {
-                        hit = Some(j);
-                        return true;
+        if against_base {
+            for (i, (p, pk)) in tris.iter().enumerate() {
+                let mut hit: Option<usize> = None;
+                ptree.query(boxes[i].0, boxes[i].1, |j| {
+                    if j > i
+                        && hit.is_none_or(|h| j < h)
+                        && boxes_meet(boxes[i].0, boxes[i].1, boxes[j].0, boxes[j].1)
+                    {
+                        let (q, qk) = &tris[j];
+                        if tri_tri(p, pk, q, qk) {
+                            hit = Some(j);
+                        }
+                    }
+                    false
+                });
+                if let Some(j) = hit {
+                    return Err(CheckFailure::SelfIntersection(
+                        i,
+                        format!("patch triangle {j}"),
+                    ));
+                }
+            }
+        }
+        // patch against mesh: each nearby face against the patch triangles near it;
+        // faces ascending, so for the smallest failing triangle the first face found
+        // is the smallest
+        let mut hit: Option<(usize, u32)> = None;
+        for &f in &near {
+            let Some((q, qk)) = face_tri(mesh, f as usize) else {
+                continue;
+            };
+            let (qlo, qhi) = tri_box(&q);
+            let (qlo, qhi) = if qlo.is_finite() && qhi.is_finite() {
+                (qlo, qhi)
+            } else {
+                (DVec3::splat(f64::NEG_INFINITY), DVec3::splat(f64::INFINITY))
+            };
+            ptree.query(qlo, qhi, |i| {
+                if hit.is_none_or(|(h, _)| i < h) && boxes_meet(boxes[i].0, boxes[i].1, qlo, qhi) {
+                    let (p, pk) = &tris[i];
+                    if tri_tri(p, pk, &q, &qk) {
+                        hit = Some((i, f));
                     }
                 }
                 false
             });
-            if let Some(j) = hit {
-                return Err(CheckFailure::SelfIntersection(
-                    i,
-                    format!("patch triangle {j}"),
-                ));
-            }
         }
-        // patch against mesh
-        for (i, (p, pk)) in tris.iter().enumerate() {
-            let (lo, hi) = boxes[i];
-            let mut hit = None;
-            let mut test = |f: usize| -> bool {
-                if let Some((q, qk)) = face_tri(mesh, f) {
-                    let (qlo, qhi) = tri_box(&q);
-                    if boxes_meet(lo, hi, qlo, qhi) && tri_tri(p, pk, &q, &qk) {
-                        hit = Some(f);
-                        return true;
-                    }
-                }
-                false
-            };
-            let found = (against_base && self.base.query(lo, hi, &mut test))
-                || self
-                    .levels
-                    .iter()
-                    .any(|l| l.tree.query(lo, hi, |j| test(l.faces[j] as usize)))
-                || self.tail.iter().any(|&f| test(f as usize))
-                || (self.next_unseen..mesh.num_faces()).any(&mut test);
-            if found {
-                if let Some(f) = hit {
-                    return Err(CheckFailure::SelfIntersection(i, format!("mesh face {f}")));
-                }
-            }
+        match hit {
+            Some((i, f)) => Err(CheckFailure::SelfIntersection(i, format!("mesh face {f}"))),
+            None => Ok(()),
         }
-        Ok(())
     }
 }
 
@@ -1417,5 +1560,117 @@ mod tests {
                 assert_eq!(chk.tail.len(), 4);
             }
         }
+    }
+
+    /// The checker finds the same failure whether it scans the face boxes or walks its
+    /// tree, and that failure is the canonical one (smallest failing patch triangle,
+    /// then the smallest patch triangle or mesh face it meets), as a brute force over
+    /// every pair finds it. After `SCANS_BEFORE_TREE` scans the tree is built.
+    #[test]
+    fn scan_and_tree_report_the_canonical_failure() {
+        use rand::{Rng, SeedableRng};
+        // a grid with a 2x2 hole, an upper sheet and a small tilted sheet crossing the
+        // space above the hole
+        let mut raw = RawMesh::default();
+        grid(6, 0.0, 0, &HOLE, &mut raw);
+        grid(6, 0.7, 49, &[], &mut raw);
+        let b = raw.positions.len() as u32;
+        raw.positions
+            .extend([v(2.2, 2.2, 0.2), v(2.8, 2.2, 0.2), v(2.5, 2.8, 0.5)]);
+        raw.faces.push([b, b + 1, b + 2]);
+        let (m, _) = Mesh::from_raw(&raw);
+        let hole = hole_at(&m, 0.0);
+        let k = hole.len();
+        let brute = |p: &Patch| -> Result<(), CheckFailure> {
+            let pos = patch_positions(&m, &hole, p);
+            let key = |i: u32| {
+                if (i as usize) < k {
+                    vertex_key(&m, hole[i as usize])
+                } else {
+                    NEW_KEY + (i as usize - k) as u64
+                }
+            };
+            let tri = |t: &[u32; 3]| (t.map(|i| pos[i as usize]), t.map(key));
+            for (i, t) in p.triangles.iter().enumerate() {
+                let (a, ak) = tri(t);
+                for (j, u) in p.triangles.iter().enumerate().skip(i + 1) {
+                    let (b, bk) = tri(u);
+                    if tri_tri(&a, &ak, &b, &bk) {
+                        return Err(CheckFailure::SelfIntersection(
+                            i,
+                            format!("patch triangle {j}"),
+                        ));
+                    }
+                }
+            }
+            for (i, t) in p.triangles.iter().enumerate() {
+                let (a, ak) = tri(t);
+                for f in 0..m.num_faces() {
+                    let (q, qk) = face_tri(&m, f).unwrap();
+                    if tri_tri(&a, &ak, &q, &qk) {
+                        return Err(CheckFailure::SelfIntersection(i, format!("mesh face {f}")));
+                    }
+                }
+            }
+            Ok(())
+        };
+        let scan = Checker::new(&m);
+        let tree = Checker::for_checks(&m, SCANS_BEFORE_TREE + 1);
+        assert!(tree.base.get().is_some());
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let mut outcomes = [0usize; 3];
+        for round in 0..SCANS_BEFORE_TREE + 20 {
+            // two apexes: the fan splits the hole in two, so patch triangles can meet
+            let centre = |r: std::ops::RangeInclusive<usize>| {
+                let n = r.clone().count() as f64;
+                r.map(|i| m.pos(hole[i % k])).sum::<DVec3>() / n
+            };
+            let mut jitter = |c: DVec3, s: f64| {
+                c + v(
+                    rng.random_range(-s..s),
+                    rng.random_range(-s..s),
+                    rng.random_range(-0.4..0.9),
+                )
+            };
+            let (mut a1, mut a2) = (
+                jitter(centre(0..=k / 2), 0.6),
+                jitter(centre(k / 2..=k), 0.6),
+            );
+            if round % 4 == 0 {
+                // each fan over the other half: the patch folds over itself
+                std::mem::swap(&mut a1, &mut a2);
+                a2.z = a1.z + 0.3;
+            }
+            let mut p = Patch {
+                new_vertices: vec![a1, a2],
+                triangles: Vec::new(),
+            };
+            let (x, y) = (k as u32, k as u32 + 1);
+            for i in 0..k as u32 {
+                let j = (i + 1) % k as u32;
+                p.triangles
+                    .push([i, j, if i < k as u32 / 2 { x } else { y }]);
+            }
+            let h = k as u32 / 2;
+            p.triangles.push([x, h, y]);
+            p.triangles.push([x, y, 0]);
+            if check_topology(&m, &hole, &p).is_err() {
+                continue;
+            }
+            let pos = patch_positions(&m, &hole, &p);
+            let want = brute(&p);
+            let got_scan = scan.check_intersections(&m, &hole, &p, &pos, true);
+            let got_tree = tree.check_intersections(&m, &hole, &p, &pos, true);
+            assert_eq!(got_scan, want, "round {round}");
+            assert_eq!(got_tree, want, "round {round}");
+            outcomes[match &want {
+                Ok(()) => 0,
+                Err(CheckFailure::SelfIntersection(_, o)) if o.starts_with("patch") => 1,
+                Err(_) => 2,
+            }] += 1;
+        }
+        assert!(outcomes.iter().all(|&n| n > 0), "{outcomes:?}");
+        // the scanning checker built its tree once it had scanned enough
+        assert!(scan.base.get().is_some());
     }
 }

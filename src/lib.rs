@@ -234,7 +234,6 @@ fn fill_all(mesh: &mut Mesh, policy: &Policy, degenerate: &mut usize) -> Vec<Hol
             *e = i;
         }
     }
-    let mut checker = check::Checker::new(mesh);
     // which holes to fill, and which rule skips the others
     let skip: Vec<Option<String>> = holes
         .iter()
@@ -249,6 +248,9 @@ fn fill_all(mesh: &mut Mesh, policy: &Policy, degenerate: &mut usize) -> Vec<Hol
             )
         })
         .collect();
+    // about one check per hole to fill (more for holes whose first patch fails)
+    let to_fill = skip.iter().filter(|s| s.is_none()).count();
+    let mut checker = check::Checker::for_checks(mesh, to_fill);
     // phase 1, in parallel: every hole's first acceptable patch against the mesh as it
     // is now (read-only); phase 2, serial in hole order: check each against the
     // patches accepted before it and apply it. The output does not depend on threads.

@@ -186,8 +186,11 @@ pub fn fill_checked(ctx: &FillContext) -> Result<(Patch, Option<PatchQuality>), 
         .map(|(_, p)| {
             let mut q = p.clone();
             q.wavefront.max_steps_per_vertex = full;
-            (q == *ctx.policy && p.wavefront.max_steps_per_vertex < full)
-                .then(|| p.wavefront.max_steps_per_vertex.saturating_mul(ctx.hole.len()))
+            (q == *ctx.policy && p.wavefront.max_steps_per_vertex < full).then(|| {
+                p.wavefront
+                    .max_steps_per_vertex
+                    .saturating_mul(ctx.hole.len())
+            })
         })
         .collect();
     let caps: Vec<usize> = resumable.iter().flatten().copied().collect();
@@ -353,10 +356,7 @@ fn precheck(ctx: &FillContext) -> Result<Option<Patch>, FillError> {
 
 /// [`fill_with_stats`] from `start`; also returns the copies of the wave kept on the
 /// way.
-fn run_wave(
-    ctx: &FillContext,
-    start: Start,
-) -> (Result<(Patch, Stats), FillError>, Snapshots) {
+fn run_wave(ctx: &FillContext, start: Start) -> (Result<(Patch, Stats), FillError>, Snapshots) {
     let opts = &ctx.policy.wavefront;
     let k = ctx.hole.len();
     let mut w = match start {
@@ -2716,7 +2716,10 @@ mod tests {
                 total += 1;
             }
         }
-        assert!(inside > total / 5 && inside < total * 4 / 5, "{inside} of {total}");
+        assert!(
+            inside > total / 5 && inside < total * 4 / 5,
+            "{inside} of {total}"
+        );
     }
 
     /// A grid query reports each id whose cells meet the query's cells exactly once
@@ -2789,11 +2792,17 @@ mod tests {
         short.wavefront.max_steps_per_vertex = 1;
         let (full, mut snaps) = run_wave(&ctx(&policy), Start::Fresh(&[k]));
         let full = full.unwrap();
-        assert!(full.1.steps > k, "the policy's run passed the cap: {:?}", full.1);
+        assert!(
+            full.1.steps > k,
+            "the policy's run passed the cap: {:?}",
+            full.1
+        );
         assert_eq!(snaps.len(), 1);
         let (at, w) = snaps.remove(0);
         assert_eq!(at, k);
-        let resumed = run_wave(&ctx(&short), Start::Resume(Box::new(w))).0.unwrap();
+        let resumed = run_wave(&ctx(&short), Start::Resume(Box::new(w)))
+            .0
+            .unwrap();
         let fresh = run_wave(&ctx(&short), Start::Fresh(&[])).0.unwrap();
         assert_eq!(resumed.1.residual_fronts, 1);
         assert_eq!(resumed, fresh);
