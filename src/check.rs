@@ -339,7 +339,7 @@ impl Checker {
                 let mut hit: Option<usize> = None;
                 ptree.query(boxes[i].0, boxes[i].1, |j| {
                     if j > i
-                        && hit.is_none_or(|h| j < h)
+                        && hit.map_or(true, |h| j < h)
                         && boxes_meet(boxes[i].0, boxes[i].1, boxes[j].0, boxes[j].1)
                     {
                         let (q, qk) = &tris[j];
@@ -372,7 +372,7 @@ impl Checker {
                 (DVec3::splat(f64::NEG_INFINITY), DVec3::splat(f64::INFINITY))
             };
             ptree.query(qlo, qhi, |i| {
-                if hit.is_none_or(|(h, _)| i < h) && boxes_meet(boxes[i].0, boxes[i].1, qlo, qhi) {
+                if hit.map_or(true, |(h, _)| i < h) && boxes_meet(boxes[i].0, boxes[i].1, qlo, qhi) {
                     let (p, pk) = &tris[i];
                     if tri_tri(p, pk, &q, &qk) {
                         hit = Some((i, f));
