@@ -372,7 +372,8 @@ impl Checker {
                 (DVec3::splat(f64::NEG_INFINITY), DVec3::splat(f64::INFINITY))
             };
             ptree.query(qlo, qhi, |i| {
-                if hit.map_or(true, |(h, _)| i < h) && boxes_meet(boxes[i].0, boxes[i].1, qlo, qhi) {
+                if hit.map_or(true, |(h, _)| i < h) && boxes_meet(boxes[i].0, boxes[i].1, qlo, qhi)
+                {
                     let (p, pk) = &tris[i];
                     if tri_tri(p, pk, &q, &qk) {
                         hit = Some((i, f));

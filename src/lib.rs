@@ -284,7 +284,10 @@ fn fill_all(mesh: &mut Mesh, policy: &Policy, degenerate: &mut usize) -> Vec<Hol
 }
 
 /// Phase 1 of [`fill_all`]: the proposals of the holes not skipped (`None` for those),
-/// computed on `policy.limits.threads` threads, biggest holes first.
+/// computed on `policy.limits.threads` threads. Each thread takes the biggest hole not
+/// yet taken (a shared counter over the holes sorted by size, largest first), so a
+/// thread that finishes early never waits while another works through a list of big
+/// holes (a fixed split put two big holes on one thread).
 fn propose_all(
     mesh: &Mesh,
     holes: &[Hole],
@@ -292,28 +295,45 @@ fn propose_all(
     policy: &Policy,
     checker: &check::Checker,
 ) -> Vec<Option<fill::Proposal>> {
-    use rayon::prelude::*;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::Mutex;
     let mut order: Vec<usize> = (0..holes.len()).filter(|&i| skip[i].is_none()).collect();
     order.sort_by_key(|&i| std::cmp::Reverse(holes[i].len()));
     let run = |i: usize| fill::propose(mesh, &holes[i], policy, checker, 0);
     let threads = match policy.limits.threads {
         0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
         n => n,
-    };
-    let computed: Vec<fill::Proposal> = if threads <= 1 || order.len() <= 1 {
-        order.iter().map(|&i| run(i)).collect()
-    } else {
-        match rayon::ThreadPoolBuilder::new().num_threads(threads).build() {
-            Ok(pool) => pool.install(|| order.par_iter().map(|&i| run(i)).collect()),
-            // no threads to be had: the same work, serially
-            Err(_) => order.iter().map(|&i| run(i)).collect(),
-        }
-    };
-    let mut slots: Vec<Option<fill::Proposal>> = vec![None; holes.len()];
-    for (i, p) in order.into_iter().zip(computed) {
-        slots[i] = Some(p);
     }
-    slots
+    .min(order.len());
+    let mut computed: Vec<Option<fill::Proposal>> = vec![None; order.len()];
+    if threads > 1 {
+        // no threads to be had: the same work, serially below
+        if let Ok(pool) = rayon::ThreadPoolBuilder::new().num_threads(threads).build() {
+            let next = AtomicUsize::new(0);
+            let slots: Vec<Mutex<Option<fill::Proposal>>> =
+                order.iter().map(|_| Mutex::new(None)).collect();
+            pool.scope(|s| {
+                for _ in 0..threads {
+                    s.spawn(|_| loop {
+                        let j = next.fetch_add(1, Ordering::Relaxed);
+                        let Some(&i) = order.get(j) else { break };
+                        let p = run(i);
+                        if let Ok(mut slot) = slots[j].lock() {
+                            *slot = Some(p);
+                        }
+                    });
+                }
+            });
+            for (c, m) in computed.iter_mut().zip(slots) {
+                *c = m.into_inner().ok().flatten();
+            }
+        }
+    }
+    let mut out: Vec<Option<fill::Proposal>> = vec![None; holes.len()];
+    for (&i, c) in order.iter().zip(computed) {
+        out[i] = Some(c.unwrap_or_else(|| run(i)));
+    }
+    out
 }
 
 /// The outer-border rule: `Some(reason)` when the loop is skipped.

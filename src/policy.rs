@@ -207,7 +207,7 @@ impl Default for Fair {
         Fair {
             continuity: 2,
             weights: Weights::Cotangent,
-            tangential_relax: 100,
+            tangential_relax: 30,
         }
     }
 }

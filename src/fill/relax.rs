@@ -56,6 +56,13 @@ pub fn tangential_relax(mesh: &Mesh, hole: &Hole, patch: &mut Patch, iterations:
         .copied()
         .filter(|t| t.iter().any(|&i| i as usize >= k))
         .collect();
+    let inv_deg: Vec<f64> = (0..n - k)
+        .map(|j| match start[j + 1] - start[j] {
+            0 => 0.0,
+            d => 1.0 / d as f64,
+        })
+        .collect();
+    // two buffers (loop vertices in both), swapped after each Jacobi step
     let mut next = pos.clone();
     let mut normal = vec![DVec3::ZERO; n - k];
     for _ in 0..iterations {
@@ -64,24 +71,27 @@ pub fn tangential_relax(mesh: &Mesh, hole: &Hole, patch: &mut Patch, iterations:
             let [a, b, c] = t.map(|i| pos[i as usize]);
             let fnrm = (b - a).cross(c - a);
             for &i in t {
-                if i as usize >= k {
-                    normal[i as usize - k] += fnrm;
+                if let Some(nv) = (i as usize).checked_sub(k).and_then(|j| normal.get_mut(j)) {
+                    *nv += fnrm;
                 }
             }
         }
-        for j in 0..n - k {
-            let l = &adj[start[j]..start[j + 1]];
-            if l.is_empty() {
+        for (j, (w, out)) in inv_deg.iter().zip(&mut next[k..]).enumerate() {
+            let p = pos[k + j];
+            if *w == 0.0 {
+                *out = p;
                 continue;
             }
-            let p = pos[k + j];
-            let c = l.iter().map(|&i| pos[i as usize]).sum::<DVec3>() / l.len() as f64;
+            let mut c = DVec3::ZERO;
+            for &i in &adj[start[j]..start[j + 1]] {
+                c += pos[i as usize];
+            }
             let nrm = normal[j].normalize_or_zero();
-            let d = c - p;
+            let d = c * *w - p;
             let moved = p + step * (d - nrm * nrm.dot(d));
-            next[k + j] = if moved.is_finite() { moved } else { p };
+            *out = if moved.is_finite() { moved } else { p };
         }
-        pos[k..].copy_from_slice(&next[k..]);
+        std::mem::swap(&mut pos, &mut next);
     }
     patch.new_vertices.copy_from_slice(&pos[k..]);
 }

@@ -464,6 +464,9 @@ struct Placed {
     ids: [Option<u32>; 3],
     p: [DVec3; 3],
     n: DVec3,
+    /// Bounding box (set by [`Wave::place`]).
+    lo: DVec3,
+    hi: DVec3,
 }
 
 /// A uniform spatial hash of ids. An id is stored in every cell its box touches; a
@@ -958,7 +961,13 @@ impl Wave {
                         .face(f)
                         .map(|c| index.get(&(c.idx() as u32)).copied());
                     let n = unit_or((p[1] - p[0]).cross(p[2] - p[0]), DVec3::ZERO);
-                    w.place(Placed { ids, p, n });
+                    w.place(Placed {
+                        ids,
+                        p,
+                        n,
+                        lo: DVec3::ZERO,
+                        hi: DVec3::ZERO,
+                    });
                 }
             }
         }
@@ -971,10 +980,11 @@ impl Wave {
         Ok(w)
     }
 
-    fn place(&mut self, t: Placed) {
+    fn place(&mut self, mut t: Placed) {
         let id = self.placed.len() as u32;
         let lo = t.p[0].min(t.p[1]).min(t.p[2]);
         let hi = t.p[0].max(t.p[1]).max(t.p[2]);
+        (t.lo, t.hi) = (lo, hi);
         self.placed.push(t);
         if !self.tri_grid.insert_box(lo, hi, id) {
             self.big.push(id);
@@ -1771,13 +1781,18 @@ impl Wave {
                 }
             })
             .collect();
+        // the triangles within `Avglen` of the step's box (farther ones cannot meet it)
         let d = DVec3::splat(self.len);
+        let (qlo, qhi) = (lo - d, hi + d);
         let mut near = std::mem::take(&mut self.scratch);
-        self.tri_grid.query_box(lo - d, hi + d, &mut near);
+        self.tri_grid.query_box(qlo, qhi, &mut near);
         near.extend_from_slice(&self.big);
         let mut ok = true;
         'outer: for &id in &near {
             let pl = &self.placed[id as usize];
+            if pl.hi.cmplt(qlo).any() || qhi.cmplt(pl.lo).any() {
+                continue;
+            }
             if pl.n.dot(nrm) > PROJECT_MIN {
                 let q = pr(&pl.p);
                 let qb = Box2::of(&q);
@@ -1893,6 +1908,8 @@ impl Wave {
             ids: t.map(Some),
             p,
             n,
+            lo: DVec3::ZERO,
+            hi: DVec3::ZERO,
         });
     }
 
