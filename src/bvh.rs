@@ -155,8 +155,20 @@ impl Bvh {
         }
         let meets =
             |n: &Node| (0..3).all(|a| (n.lo[a] as f64) <= hi[a] && lo[a] <= (n.hi[a] as f64));
-        let mut stack: Vec<u32> = vec![0];
-        while let Some(ni) = stack.pop() {
+        // a stack on the stack while the tree is shallow enough (always, but for
+        // degenerate inputs: then on the heap), in the same order either way
+        let mut fixed = [0u32; 64];
+        let mut top = 1usize;
+        let mut spill: Vec<u32> = Vec::new();
+        loop {
+            let ni = if let Some(x) = spill.pop() {
+                x
+            } else if top > 0 {
+                top -= 1;
+                fixed[top]
+            } else {
+                break;
+            };
             let n = &self.nodes[ni as usize];
             if !meets(n) {
                 continue;
@@ -168,11 +180,68 @@ impl Bvh {
                     }
                 }
             } else {
-                stack.push(n.first);
-                stack.push(n.first + 1);
+                for c in [n.first, n.first + 1] {
+                    if spill.is_empty() && top < fixed.len() {
+                        fixed[top] = c;
+                        top += 1;
+                    } else {
+                        spill.push(c);
+                    }
+                }
             }
         }
         false
+    }
+
+    /// Calls `visit(i, j)` once for every unordered pair of distinct primitives whose
+    /// leaf boxes meet (a superset of the pairs whose own boxes meet), by one walk of
+    /// the tree against itself.
+    pub fn self_pairs(&self, mut visit: impl FnMut(usize, usize)) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let meet = |a: &Node, b: &Node| (0..3).all(|x| a.lo[x] <= b.hi[x] && b.lo[x] <= a.hi[x]);
+        let leaf = |n: &Node| &self.perm[n.first as usize..(n.first + n.count) as usize];
+        let mut stack: Vec<(u32, u32)> = vec![(0, 0)];
+        while let Some((a, b)) = stack.pop() {
+            let (na, nb) = (&self.nodes[a as usize], &self.nodes[b as usize]);
+            if a == b {
+                if na.count > 0 {
+                    let l = leaf(na);
+                    for (x, &p) in l.iter().enumerate() {
+                        for &q in &l[x + 1..] {
+                            visit(p as usize, q as usize);
+                        }
+                    }
+                } else {
+                    let (l, r) = (na.first, na.first + 1);
+                    stack.push((l, l));
+                    stack.push((r, r));
+                    stack.push((l, r));
+                }
+                continue;
+            }
+            if !meet(na, nb) {
+                continue;
+            }
+            match (na.count > 0, nb.count > 0) {
+                (true, true) => {
+                    for &p in leaf(na) {
+                        for &q in leaf(nb) {
+                            visit(p as usize, q as usize);
+                        }
+                    }
+                }
+                (false, true) => {
+                    stack.push((na.first, b));
+                    stack.push((na.first + 1, b));
+                }
+                _ => {
+                    stack.push((a, nb.first));
+                    stack.push((a, nb.first + 1));
+                }
+            }
+        }
     }
 }
 
@@ -449,6 +518,39 @@ mod tests {
 
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(64))]
+        /// The walk of a tree against itself visits each unordered pair once, and
+        /// every pair of meeting boxes among them.
+        #[test]
+        fn self_pairs_match_brute_force(
+            tris in prop::collection::vec(prop::array::uniform9(-10.0f64..10.0), 1..300),
+            scale in 0.01f64..5.0,
+        ) {
+            let boxes: Vec<(DVec3, DVec3)> = tris
+                .iter()
+                .map(|t| {
+                    let a = DVec3::new(t[0], t[1], t[2]);
+                    let b = a + DVec3::new(t[3], t[4], t[5]) * (scale / 10.0);
+                    let c = a + DVec3::new(t[6], t[7], t[8]) * (scale / 10.0);
+                    tri_box(&[a, b, c])
+                })
+                .collect();
+            let bvh = Bvh::build(boxes.len(), |i| boxes[i]);
+            let mut got = Vec::new();
+            bvh.self_pairs(|i, j| {
+                assert_ne!(i, j);
+                got.push((i.min(j), i.max(j)));
+            });
+            got.sort_unstable();
+            prop_assert!(got.windows(2).all(|w| w[0] != w[1]), "a pair twice");
+            for i in 0..boxes.len() {
+                for j in i + 1..boxes.len() {
+                    if boxes_meet(boxes[i].0, boxes[i].1, boxes[j].0, boxes[j].1) {
+                        prop_assert!(got.binary_search(&(i, j)).is_ok(), "pair {} {} missed", i, j);
+                    }
+                }
+            }
+        }
+
         #[test]
         fn query_matches_brute_force(
             tris in prop::collection::vec(prop::array::uniform9(-100.0f64..100.0), 1..400),

@@ -26,7 +26,6 @@
 //!   (as the union of its edges).
 
 use crate::bvh::{boxes_meet, f32_down, f32_up, tri_box, Bvh};
-use crate::fasthash::{HashMap, HashSet};
 use crate::fill::geom;
 use crate::fill::Patch;
 use crate::mesh::{Mesh, VertexId};
@@ -324,6 +323,7 @@ impl Checker {
             .map(|t| (t.map(|i| pos[i as usize]), t.map(|i| keys[i as usize])))
             .collect();
         let boxes: Vec<(DVec3, DVec3)> = tris.iter().map(|(p, _)| tri_box(p)).collect();
+        let axes: Vec<Option<usize>> = tris.iter().map(|(p, _)| tri_axis(p)).collect();
         let (plo, phi) = boxes.iter().fold(
             (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
             |(lo, hi), b| (lo.min(b.0), hi.max(b.1)),
@@ -333,28 +333,26 @@ impl Checker {
             return Ok(());
         }
         let ptree = Bvh::build(tris.len(), |i| boxes[i]);
-        // patch against patch
+        // patch against patch: every pair whose boxes meet, the smallest failing one
+        // kept (the walk's order is not that of the pairs)
         if against_base {
-            for (i, (p, pk)) in tris.iter().enumerate() {
-                let mut hit: Option<usize> = None;
-                ptree.query(boxes[i].0, boxes[i].1, |j| {
-                    if j > i
-                        && hit.map_or(true, |h| j < h)
-                        && boxes_meet(boxes[i].0, boxes[i].1, boxes[j].0, boxes[j].1)
-                    {
-                        let (q, qk) = &tris[j];
-                        if tri_tri(p, pk, q, qk) {
-                            hit = Some(j);
-                        }
+            let mut hit: Option<(usize, usize)> = None;
+            ptree.self_pairs(|a, b| {
+                let (i, j) = (a.min(b), a.max(b));
+                if hit.map_or(true, |h| (i, j) < h)
+                    && boxes_meet(boxes[i].0, boxes[i].1, boxes[j].0, boxes[j].1)
+                {
+                    let ((p, pk), (q, qk)) = (&tris[i], &tris[j]);
+                    if tri_tri_axes(p, pk, axes[i], q, qk, axes[j]) {
+                        hit = Some((i, j));
                     }
-                    false
-                });
-                if let Some(j) = hit {
-                    return Err(CheckFailure::SelfIntersection(
-                        i,
-                        format!("patch triangle {j}"),
-                    ));
                 }
+            });
+            if let Some((i, j)) = hit {
+                return Err(CheckFailure::SelfIntersection(
+                    i,
+                    format!("patch triangle {j}"),
+                ));
             }
         }
         // patch against mesh: each nearby face against the patch triangles near it;
@@ -365,6 +363,7 @@ impl Checker {
             let Some((q, qk)) = face_tri(mesh, f as usize) else {
                 continue;
             };
+            let qa = tri_axis(&q);
             let (qlo, qhi) = tri_box(&q);
             let (qlo, qhi) = if qlo.is_finite() && qhi.is_finite() {
                 (qlo, qhi)
@@ -375,7 +374,7 @@ impl Checker {
                 if hit.map_or(true, |(h, _)| i < h) && boxes_meet(boxes[i].0, boxes[i].1, qlo, qhi)
                 {
                     let (p, pk) = &tris[i];
-                    if tri_tri(p, pk, &q, &qk) {
+                    if tri_tri_axes(p, pk, axes[i], &q, &qk, qa) {
                         hit = Some((i, f));
                     }
                 }
@@ -516,12 +515,25 @@ fn in_tri2(p: P3, t: &[P3; 3], drop: usize) -> bool {
 
 /// Closed segment `st` meets the closed non-degenerate triangle `t`.
 fn seg_tri(s: P3, e: P3, t: &[P3; 3]) -> bool {
+    seg_tri_sided(s, e, t).unwrap_or(false)
+}
+
+/// [`seg_tri`], or `None` when the segment lies strictly on one side of the
+/// triangle's plane (so it does not meet it).
+fn seg_tri_sided(s: P3, e: P3, t: &[P3; 3]) -> Option<bool> {
     let [a, b, c] = *t;
     let os = o3(a, b, c, s);
     let oe = o3(a, b, c, e);
     if (os > 0.0 && oe > 0.0) || (os < 0.0 && oe < 0.0) {
-        return false;
+        return None;
     }
+    Some(seg_tri_across(s, e, t, os, oe))
+}
+
+/// The rest of [`seg_tri`], with the sides `os`, `oe` of the ends not both strict
+/// and equal.
+fn seg_tri_across(s: P3, e: P3, t: &[P3; 3], os: f64, oe: f64) -> bool {
+    let [a, b, c] = *t;
     if os == 0.0 && oe == 0.0 {
         let Some(drop) = proj_axis(a, b, c) else {
             return false;
@@ -564,8 +576,16 @@ fn seg_seg3(a: P3, b: P3, c: P3, d: P3) -> bool {
 
 /// Closed triangles `p` and `q` (no shared vertices) meet.
 pub fn tri_tri_plain(p: &[P3; 3], q: &[P3; 3]) -> bool {
-    let pa = proj_axis(p[0], p[1], p[2]);
-    let qa = proj_axis(q[0], q[1], q[2]);
+    tri_tri_plain_axes(p, tri_axis(p), q, tri_axis(q))
+}
+
+/// The projection axis of a triangle ([`proj_axis`]), to pass to [`tri_tri_axes`].
+pub fn tri_axis(t: &[P3; 3]) -> Option<usize> {
+    proj_axis(t[0], t[1], t[2])
+}
+
+/// [`tri_tri_plain`] with the triangles' [`tri_axis`] given.
+fn tri_tri_plain_axes(p: &[P3; 3], pa: Option<usize>, q: &[P3; 3], qa: Option<usize>) -> bool {
     let edges = |t: &[P3; 3]| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])];
     match (pa, qa) {
         (Some(_), Some(_)) => {
@@ -602,6 +622,19 @@ pub fn tri_tri_plain(p: &[P3; 3], q: &[P3; 3]) -> bool {
 /// degenerate `p` is reported as intersecting whenever it shares a vertex.
 /// `q` may be degenerate (a zero-area face of the input).
 pub fn tri_tri(p: &[P3; 3], pk: &[u64; 3], q: &[P3; 3], qk: &[u64; 3]) -> bool {
+    tri_tri_axes(p, pk, tri_axis(p), q, qk, tri_axis(q))
+}
+
+/// [`tri_tri`] with the triangles' [`tri_axis`] given (computed once per triangle by a
+/// caller that tests it against many).
+pub fn tri_tri_axes(
+    p: &[P3; 3],
+    pk: &[u64; 3],
+    pa: Option<usize>,
+    q: &[P3; 3],
+    qk: &[u64; 3],
+    qa: Option<usize>,
+) -> bool {
     // the shared corners, without allocating (called for every candidate pair)
     let mut shared = [(0usize, 0usize); 9];
     let mut count = 0;
@@ -614,17 +647,22 @@ pub fn tri_tri(p: &[P3; 3], pk: &[u64; 3], q: &[P3; 3], qk: &[u64; 3]) -> bool {
         }
     }
     match count {
-        0 => tri_tri_plain(p, q),
+        0 => tri_tri_plain_axes(p, pa, q, qa),
         1 => {
             let (i, j) = shared[0];
             let w = p[i];
             let (p1, p2) = (p[(i + 1) % 3], p[(i + 2) % 3]);
             let (q1, q2) = (q[(j + 1) % 3], q[(j + 2) % 3]);
-            if proj_axis(p[0], p[1], p[2]).is_none() {
+            if pa.is_none() {
                 return true;
             }
-            if proj_axis(q[0], q[1], q[2]).is_some() {
-                return seg_tri(p1, p2, q) || seg_tri(q1, q2, p);
+            if qa.is_some() {
+                // p1 and p2 strictly on one side of q's plane (w is on it): p meets
+                // that plane, so q, at w only
+                return match seg_tri_sided(p1, p2, q) {
+                    None => false,
+                    Some(hit) => hit || seg_tri(q1, q2, p),
+                };
             }
             // q is a segment through w: it meets p beyond w iff one of its two
             // pieces from w runs into p
@@ -638,7 +676,7 @@ pub fn tri_tri(p: &[P3; 3], pk: &[u64; 3], q: &[P3; 3], qk: &[u64; 3]) -> bool {
             let (u, v) = (p[i0], p[i1]);
             let pf = p[3 - i0 - i1];
             let qf = q[3 - j0 - j1];
-            let Some(drop) = proj_axis(p[0], p[1], p[2]) else {
+            let Some(drop) = pa else {
                 return true;
             };
             if o3(u, v, pf, qf) != 0.0 {
@@ -687,8 +725,6 @@ pub fn check_topology(mesh: &Mesh, hole: &[VertexId], patch: &Patch) -> Result<(
     if let Some(p) = patch.new_vertices.iter().position(|p| !p.is_finite()) {
         return err(format!("new vertex {p} has a non-finite coordinate"));
     }
-    let mut directed: HashSet<(u32, u32)> =
-        HashSet::with_capacity_and_hasher(patch.triangles.len() * 3, Default::default());
     for (ti, t) in patch.triangles.iter().enumerate() {
         if t.iter().any(|&i| i as usize >= n) {
             return err(format!("triangle {ti} has an index out of range"));
@@ -696,56 +732,77 @@ pub fn check_topology(mesh: &Mesh, hole: &[VertexId], patch: &Patch) -> Result<(
         if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
             return err(format!("triangle {ti} repeats a vertex"));
         }
+    }
+    // the corners of each vertex, as wedges (next, previous) in its triangles, one
+    // list after the other sorted by `next`: the directed edges v -> next, and the
+    // fan around v
+    let mut start = vec![0usize; n + 1];
+    for t in &patch.triangles {
+        for &v in t {
+            start[v as usize + 1] += 1;
+        }
+    }
+    for i in 0..n {
+        start[i + 1] += start[i];
+    }
+    let mut fill = start.clone();
+    let mut wedge = vec![(0u32, 0u32); start[n]];
+    for t in &patch.triangles {
         for c in 0..3 {
-            if !directed.insert((t[c], t[(c + 1) % 3])) {
-                return err(format!(
-                    "edge {}-{} is used twice in one direction",
-                    t[c],
-                    t[(c + 1) % 3]
-                ));
-            }
+            let v = t[c] as usize;
+            wedge[fill[v]] = (t[(c + 1) % 3], t[(c + 2) % 3]);
+            fill[v] += 1;
+        }
+    }
+    for v in 0..n {
+        wedge[start[v]..start[v + 1]].sort_unstable();
+    }
+    let out = |v: u32| &wedge[start[v as usize]..start[v as usize + 1]];
+    let has_edge = |a: u32, b: u32| out(a).binary_search_by_key(&b, |w| w.0).is_ok();
+    for v in 0..n as u32 {
+        if let Some(w) = out(v).windows(2).find(|w| w[0].0 == w[1].0) {
+            return err(format!(
+                "edge {v}-{} is used twice in one direction",
+                w[0].0
+            ));
         }
     }
     let is_loop_edge =
         |a: u32, b: u32| (a as usize) < k && (b as usize) < k && (a as usize + 1) % k == b as usize;
     let mut edges = 0usize;
-    for &(a, b) in &directed {
-        if is_loop_edge(a, b) {
-            edges += 1;
-            continue;
-        }
-        if is_loop_edge(b, a) {
-            return err(format!(
-                "boundary edge {b}-{a} is covered with the wrong orientation"
-            ));
-        }
-        if !directed.contains(&(b, a)) {
-            return err(format!("edge {a}-{b} is left open"));
-        }
-        if a < b {
-            edges += 1;
-        }
-        // a chord between two loop vertices must not duplicate an existing mesh edge
-        if (a as usize) < k && (b as usize) < k && a < b {
-            let (va, vb) = (hole[a as usize], hole[b as usize]);
-            if mesh.topo.neighbors(va).contains(&vb) {
-                return err(format!("chord {a}-{b} duplicates an existing mesh edge"));
+    for a in 0..n as u32 {
+        for &(b, _) in out(a) {
+            if is_loop_edge(a, b) {
+                edges += 1;
+                continue;
+            }
+            if is_loop_edge(b, a) {
+                return err(format!(
+                    "boundary edge {b}-{a} is covered with the wrong orientation"
+                ));
+            }
+            if !has_edge(b, a) {
+                return err(format!("edge {a}-{b} is left open"));
+            }
+            if a < b {
+                edges += 1;
+            }
+            // a chord between two loop vertices must not duplicate an existing mesh edge
+            if (a as usize) < k && (b as usize) < k && a < b {
+                let (va, vb) = (hole[a as usize], hole[b as usize]);
+                if mesh.topo.neighbors(va).contains(&vb) {
+                    return err(format!("chord {a}-{b} duplicates an existing mesh edge"));
+                }
             }
         }
     }
     for i in 0..k {
-        if !directed.contains(&(i as u32, ((i + 1) % k) as u32)) {
+        if !has_edge(i as u32, ((i + 1) % k) as u32) {
             return err(format!("boundary edge {i}-{} is not covered", (i + 1) % k));
         }
     }
     // Euler characteristic of a disk: V - E + F = 1
-    let mut used = vec![false; n];
-    for t in &patch.triangles {
-        for &i in t {
-            used[i as usize] = true;
-        }
-    }
-    if let Some(i) = used.iter().position(|u| !u) {
+    if let Some(i) = (0..n).find(|&i| start[i] == start[i + 1]) {
         return err(format!("vertex {i} is not used by any triangle"));
     }
     let chi = n as i64 - edges as i64 + patch.triangles.len() as i64;
@@ -774,33 +831,27 @@ pub fn check_topology(mesh: &Mesh, hole: &[VertexId], patch: &Patch) -> Result<(
     if let Some(i) = (1..n).find(|&i| root(&mut parent, i) != r0) {
         return err(format!("vertex {i} is not connected to the hole's loop"));
     }
-    // every vertex must have a single fan (no pinched vertex inside the patch)
-    let mut by_vertex: HashMap<u32, Vec<(u32, u32)>> = HashMap::default();
-    for t in &patch.triangles {
-        for c in 0..3 {
-            by_vertex
-                .entry(t[c])
-                .or_default()
-                .push((t[(c + 1) % 3], t[(c + 2) % 3]));
-        }
-    }
-    for (&v, wedges) in &by_vertex {
-        // follow wedge (a, b) -> the wedge starting at b
-        let next: HashMap<u32, u32> = wedges.iter().copied().collect();
-        if next.len() != wedges.len() {
-            return err(format!("vertex {v} is pinched"));
-        }
-        let start = if (v as usize) < k {
-            ((v as usize + 1) % k) as u32
+    // every vertex must have a single fan (no pinched vertex inside the patch): follow
+    // wedge (a, b) to the wedge starting at b (its `next` is unique, checked above)
+    for v in 0..n {
+        let wedges = &wedge[start[v]..start[v + 1]];
+        let next = |a: u32| {
+            wedges
+                .binary_search_by_key(&a, |w| w.0)
+                .ok()
+                .map(|i| wedges[i].1)
+        };
+        let begin = if v < k {
+            ((v + 1) % k) as u32
         } else {
             wedges[0].0
         };
-        let mut cur = start;
+        let mut cur = begin;
         let mut steps = 0;
-        while let Some(&b) = next.get(&cur) {
+        while let Some(b) = next(cur) {
             steps += 1;
             cur = b;
-            if cur == start || steps > wedges.len() {
+            if cur == begin || steps > wedges.len() {
                 break;
             }
         }
@@ -821,8 +872,7 @@ pub fn check_degenerate(pos: &[DVec3], patch: &Patch, opts: &Checks) -> Result<(
         if area.is_nan() || area <= 1e-12 * l * l {
             return Err(CheckFailure::Degenerate(ti, format!("area {area:e}")));
         }
-        let ang = geom::angles(a, b, c);
-        let m = ang[0].min(ang[1]).min(ang[2]);
+        let m = geom::smallest_angle(a, b, c);
         if m < min_angle {
             return Err(CheckFailure::Degenerate(
                 ti,
@@ -842,25 +892,32 @@ pub fn quality(pos: &[DVec3], k: usize, patch: &Patch) -> PatchQuality {
         if geom::quality(a, b, c) > 1.39 {
             good += 1;
         }
-        for x in geom::angles(a, b, c) {
-            min_angle = min_angle.min(x);
-        }
+        min_angle = min_angle.min(geom::smallest_angle(a, b, c));
     }
     let nnew = patch.new_vertices.len();
     let valence6_share = if nnew == 0 {
         None
     } else {
-        let mut nb: Vec<HashSet<u32>> = vec![HashSet::default(); nnew];
+        // distinct (new vertex, neighbour) pairs, counted per vertex
+        let mut pairs: Vec<(u32, u32)> = Vec::with_capacity(patch.triangles.len() * 6);
         for t in &patch.triangles {
             for c in 0..3 {
-                let v = t[c] as usize;
-                if v >= k {
-                    nb[v - k].insert(t[(c + 1) % 3]);
-                    nb[v - k].insert(t[(c + 2) % 3]);
+                if t[c] as usize >= k {
+                    pairs.push((t[c], t[(c + 1) % 3]));
+                    pairs.push((t[c], t[(c + 2) % 3]));
                 }
             }
         }
-        Some(nb.iter().filter(|s| s.len() == 6).count() as f64 / nnew as f64)
+        pairs.sort_unstable();
+        pairs.dedup();
+        let mut six = 0usize;
+        let mut i = 0;
+        while i < pairs.len() {
+            let j = pairs[i..].partition_point(|p| p.0 == pairs[i].0) + i;
+            six += (j - i == 6) as usize;
+            i = j;
+        }
+        Some(six as f64 / nnew as f64)
     };
     PatchQuality {
         q_good_share: if patch.triangles.is_empty() {

@@ -41,6 +41,23 @@ pub fn angles(a: DVec3, b: DVec3, c: DVec3) -> [f64; 3] {
     [angle_at(a, b, c), angle_at(b, c, a), angle_at(c, a, b)]
 }
 
+/// The smallest interior angle (radians): the one opposite the shortest edge (one
+/// `atan2` instead of three).
+pub fn smallest_angle(a: DVec3, b: DVec3, c: DVec3) -> f64 {
+    let (la, lb, lc) = (
+        (c - b).length_squared(),
+        (a - c).length_squared(),
+        (b - a).length_squared(),
+    );
+    if la <= lb && la <= lc {
+        angle_at(a, b, c)
+    } else if lb <= lc {
+        angle_at(b, c, a)
+    } else {
+        angle_at(c, a, b)
+    }
+}
+
 /// The angle at `p` between the directions to `q` and `r` (radians, 0 when undefined).
 pub fn angle_at(p: DVec3, q: DVec3, r: DVec3) -> f64 {
     let u = q - p;

@@ -126,7 +126,7 @@ const FACING_MIN: f64 = 0.05;
 /// Nearby triangles facing the vertex normal more than this are tested in its tangent
 /// plane; the others with a 3D crossing test.
 const PROJECT_MIN: f64 = 0.2;
-/// A cell of the spatial hash is this many `Avglen` wide.
+/// A cell of the spatial grids is this many `Avglen` wide.
 const CELL: f64 = 2.0;
 /// With `placement = "edge_plane"`, the plane of the two front edges is used fully when
 /// θ is at least this far from 0 and π, and blended into the interpolated elevation
@@ -469,67 +469,90 @@ struct Placed {
     hi: DVec3,
 }
 
-/// A uniform spatial hash of ids. An id is stored in every cell its box touches; a
-/// query reports each id whose cells meet the query's cells exactly once (in the
-/// first cell of the overlap), so no sorting or deduplication is needed.
+/// A uniform grid of ids over the loop's best-fit plane: an id is stored in every cell
+/// that the projection of its box touches (positions beyond the grid fall in its border
+/// cells), in per-cell linked lists over one array (no allocation per cell; a copy is
+/// two array copies). A query reports each id whose cells meet the query's cells
+/// exactly once (in the first cell of the overlap). It is a broad phase only: callers
+/// test the ids' own boxes, so what they find does not depend on the grid.
 #[derive(Clone)]
 struct Grid {
+    centre: DVec3,
+    u: DVec3,
+    w: DVec3,
+    /// Plane coordinate of the grid's corner, inverse cell size, cells per side.
+    origin: f64,
     inv: f64,
-    cells: HashMap<u64, Vec<u32>>,
-    /// Cell box (`lo`, `hi`) of each id (indexed by id; ids not in the grid unused).
-    boxes: Vec<([i64; 3], [i64; 3])>,
-    /// The ids in the grid.
-    ids: Vec<u32>,
+    n: usize,
+    /// First entry of each cell's list (`NONE`: empty).
+    head: Vec<u32>,
+    /// Entries: id and next entry of the same cell.
+    entries: Vec<(u32, u32)>,
+    /// Cell range `[i0, j0, i1, j1]` of each id (indexed by id).
+    ranges: Vec<[u32; 4]>,
 }
 
-/// Cell coordinates packed into one hash key (21 bits each; a collision between far
-/// cells costs a look at more ids, never a wrong answer).
-fn cell_key(x: i64, y: i64, z: i64) -> u64 {
-    const M: i64 = (1 << 21) - 1;
-    ((x & M) as u64) | (((y & M) as u64) << 21) | (((z & M) as u64) << 42)
-}
+/// End of a cell's list.
+const NONE: u32 = u32::MAX;
+/// Largest number of cells per side of a [`Grid`] (the cells grow past it).
+const MAX_SIDE: usize = 256;
 
 impl Grid {
-    fn new(cell: f64) -> Grid {
+    /// A grid with cells of about `cell` over the square of half-width `extent` around
+    /// `centre` in the plane spanned by `u` and `w` (unit, orthogonal).
+    fn new(cell: f64, centre: DVec3, u: DVec3, w: DVec3, extent: f64) -> Grid {
+        let extent = if extent.is_finite() && extent > 0.0 {
+            extent
+        } else {
+            1.0
+        };
+        let cell = if cell.is_finite() && cell > 0.0 {
+            cell
+        } else {
+            extent
+        };
+        let n = ((2.0 * extent / cell).ceil() as usize).clamp(1, MAX_SIDE);
         Grid {
-            inv: 1.0 / cell,
-            cells: HashMap::default(),
-            boxes: Vec::new(),
-            ids: Vec::new(),
+            centre,
+            u,
+            w,
+            origin: -extent,
+            inv: n as f64 / (2.0 * extent),
+            n,
+            head: vec![NONE; n * n],
+            entries: Vec::new(),
+            ranges: Vec::new(),
         }
     }
-    fn key(&self, p: DVec3) -> [i64; 3] {
-        let f = |x: f64| (x * self.inv).floor() as i64;
-        [f(p.x), f(p.y), f(p.z)]
+    /// Cell range of the projection of the box `[lo, hi]`.
+    fn range(&self, lo: DVec3, hi: DVec3) -> [u32; 4] {
+        let c = (lo + hi) * 0.5 - self.centre;
+        let h = (hi - lo) * 0.5;
+        let span = |a: DVec3| h.x * a.x.abs() + h.y * a.y.abs() + h.z * a.z.abs();
+        let (cu, ru) = (c.dot(self.u), span(self.u));
+        let (cw, rw) = (c.dot(self.w), span(self.w));
+        let max = (self.n - 1) as f64;
+        let cell = |x: f64| ((x - self.origin) * self.inv).floor().clamp(0.0, max) as u32;
+        [cell(cu - ru), cell(cw - rw), cell(cu + ru), cell(cw + rw)]
     }
-    fn span(&self, lo: DVec3, hi: DVec3) -> ([i64; 3], [i64; 3], i64) {
-        let a = self.key(lo);
-        let b = self.key(hi);
-        let n = (b[0] - a[0] + 1)
-            .saturating_mul(b[1] - a[1] + 1)
-            .saturating_mul(b[2] - a[2] + 1);
-        (a, b, n)
-    }
-    /// Inserts `id` into every cell the box touches; false when it spans too many.
+    /// Inserts `id` into every cell the box touches; false when it spans more than
+    /// `MAX_CELLS` (the caller keeps such ids apart).
     fn insert_box(&mut self, lo: DVec3, hi: DVec3, id: u32) -> bool {
-        let (a, b, n) = self.span(lo, hi);
-        if n > MAX_CELLS {
+        let r = self.range(lo, hi);
+        let cells = (r[2] - r[0] + 1) as i64 * (r[3] - r[1] + 1) as i64;
+        if cells > MAX_CELLS {
             return false;
         }
         let i = id as usize;
-        if self.boxes.len() <= i {
-            self.boxes.resize(i + 1, ([0; 3], [-1; 3]));
+        if self.ranges.len() <= i {
+            self.ranges.resize(i + 1, [1, 1, 0, 0]);
         }
-        self.boxes[i] = (a, b);
-        self.ids.push(id);
-        for x in a[0]..=b[0] {
-            for y in a[1]..=b[1] {
-                for z in a[2]..=b[2] {
-                    let v = self.cells.entry(cell_key(x, y, z)).or_default();
-                    if v.last() != Some(&id) {
-                        v.push(id);
-                    }
-                }
+        self.ranges[i] = r;
+        for y in r[1]..=r[3] {
+            for x in r[0]..=r[2] {
+                let c = y as usize * self.n + x as usize;
+                self.entries.push((id, self.head[c]));
+                self.head[c] = (self.entries.len() - 1) as u32;
             }
         }
         true
@@ -537,31 +560,18 @@ impl Grid {
     /// Every id in a cell the box touches, each once (in no particular order).
     fn query_box(&self, lo: DVec3, hi: DVec3, out: &mut Vec<u32>) {
         out.clear();
-        let (a, b, n) = self.span(lo, hi);
-        if n > self.cells.len() as i64 || n > MAX_CELLS {
-            out.extend_from_slice(&self.ids);
-            return;
-        }
-        for x in a[0]..=b[0] {
-            for y in a[1]..=b[1] {
-                for z in a[2]..=b[2] {
-                    let Some(ids) = self.cells.get(&cell_key(x, y, z)) else {
-                        continue;
-                    };
-                    for &id in ids {
-                        let (l, h) = self.boxes[id as usize];
-                        // the id's box holds this cell, and this is the first cell of
-                        // its overlap with the query
-                        if x == l[0].max(a[0])
-                            && y == l[1].max(a[1])
-                            && z == l[2].max(a[2])
-                            && x <= h[0]
-                            && y <= h[1]
-                            && z <= h[2]
-                        {
-                            out.push(id);
-                        }
+        let q = self.range(lo, hi);
+        for y in q[1]..=q[3] {
+            for x in q[0]..=q[2] {
+                let mut e = self.head[y as usize * self.n + x as usize];
+                while e != NONE {
+                    let (id, next) = self.entries[e as usize];
+                    let r = self.ranges[id as usize];
+                    // this is the first cell of the id's overlap with the query
+                    if x == r[0].max(q[0]) && y == r[1].max(q[1]) {
+                        out.push(id);
                     }
+                    e = next;
                 }
             }
         }
@@ -918,9 +928,9 @@ impl Wave {
             alive: Vec::with_capacity(2 * k),
             alive_pos: Vec::with_capacity(2 * k),
             placed: Vec::new(),
-            tri_grid: Grid::new(CELL * len),
+            tri_grid: Grid::new(CELL * len, centre, pu, pw, reach + 2.0 * len),
             big: Vec::new(),
-            node_grid: Grid::new(CELL * len),
+            node_grid: Grid::new(CELL * len, centre, pu, pw, reach + 2.0 * len),
             rng: ChaCha8Rng::seed_from_u64(
                 ctx.policy.seed ^ (ctx.hole.id as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
             ),
@@ -1488,6 +1498,10 @@ impl Wave {
                 continue;
             }
             let (p, q) = (self.pos[nd.vert as usize], self.pos[b as usize]);
+            // edges found from their ends in the box (whatever else the grid returns)
+            if (p - x).abs().cmpgt(d).any() {
+                continue;
+            }
             let e = q - p;
             let t = ((x - p).dot(e) / e.length_squared().max(1e-300)).clamp(0.0, 1.0);
             if (p + e * t - x).length() < clear && t > 0.0 && t < 1.0 {
@@ -1735,8 +1749,7 @@ impl Wave {
         let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
         for t in tris {
             let p = t.map(at);
-            let ang = super::geom::angles(p[0], p[1], p[2]);
-            if ang.iter().any(|&a| !(a >= min_angle)) {
+            if !(super::geom::smallest_angle(p[0], p[1], p[2]) >= min_angle) {
                 return false;
             }
             let n = unit_or((p[1] - p[0]).cross(p[2] - p[0]), DVec3::ZERO);
@@ -2739,19 +2752,23 @@ mod tests {
         );
     }
 
-    /// A grid query reports each id whose cells meet the query's cells exactly once
-    /// (all ids when the query spans more cells than are filled), as the brute force.
+    /// A grid query reports each id at most once, every id whose box meets the query
+    /// box among them (also boxes beyond the grid's extent, in its border cells), and
+    /// exactly the ids whose cell ranges meet the query's.
     #[test]
     fn grid_query_reports_every_overlap_once() {
         use rand::Rng;
         let mut rng = ChaCha8Rng::seed_from_u64(11);
-        let mut g = Grid::new(0.5);
+        let n = DVec3::new(0.3, -0.2, 1.0).normalize();
+        let u = n.any_orthonormal_vector();
+        let w = n.cross(u);
+        let mut g = Grid::new(0.1, DVec3::new(0.1, 0.2, 0.3), u, w, 3.0);
         let mut boxes = Vec::new();
         let rand_box = |rng: &mut ChaCha8Rng, size: f64| {
             let c = DVec3::new(
-                rng.random_range(-3.0..3.0),
-                rng.random_range(-3.0..3.0),
-                rng.random_range(-3.0..3.0),
+                rng.random_range(-4.0..4.0),
+                rng.random_range(-4.0..4.0),
+                rng.random_range(-4.0..4.0),
             );
             let h = DVec3::new(
                 rng.random_range(0.0..size),
@@ -2763,22 +2780,19 @@ mod tests {
         for id in 0..400u32 {
             let (lo, hi) = rand_box(&mut rng, if id % 50 == 0 { 6.0 } else { 0.6 });
             if g.insert_box(lo, hi, id) {
-                boxes.push((id, g.key(lo), g.key(hi)));
+                boxes.push((id, lo, hi, g.range(lo, hi)));
             }
         }
         assert!(boxes.len() < 400, "some boxes span too many cells");
         let mut out = Vec::new();
+        let mut found = 0;
         for q in 0..300 {
             let (lo, hi) = rand_box(&mut rng, if q % 20 == 0 { 8.0 } else { 1.0 });
             g.query_box(lo, hi, &mut out);
-            let (a, b, n) = g.span(lo, hi);
+            let r = g.range(lo, hi);
             let mut want: Vec<u32> = boxes
                 .iter()
-                .filter(|(_, l, h)| {
-                    n > g.cells.len() as i64
-                        || n > MAX_CELLS
-                        || (0..3).all(|i| l[i] <= b[i] && a[i] <= h[i])
-                })
+                .filter(|(_, _, _, c)| c[0] <= r[2] && r[0] <= c[2] && c[1] <= r[3] && r[1] <= c[3])
                 .map(|b| b.0)
                 .collect();
             let mut got = out.clone();
@@ -2786,7 +2800,14 @@ mod tests {
             assert!(got.windows(2).all(|w| w[0] != w[1]), "an id twice");
             want.sort_unstable();
             assert_eq!(got, want);
+            for (id, blo, bhi, _) in &boxes {
+                if !(bhi.cmplt(lo).any() || hi.cmplt(*blo).any()) {
+                    assert!(got.binary_search(id).is_ok(), "box {id} meets the query");
+                    found += 1;
+                }
+            }
         }
+        assert!(found > 100, "{found}");
     }
 
     /// A variant with fewer steps per vertex resumed from the copy the policy's run kept

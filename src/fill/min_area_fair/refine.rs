@@ -356,9 +356,7 @@ impl<'a> Refiner<'a> {
             })
             .collect();
         let mut val = vec![0i64; n];
-        let mut keys: Vec<(u32, u32)> = self.edges.keys().copied().collect();
-        keys.sort_unstable();
-        for &(a, b) in &keys {
+        for &(a, b) in self.edges.keys() {
             if a < b || !self.edges.contains_key(&(b, a)) {
                 val[a as usize] += 1;
                 val[b as usize] += 1;
@@ -372,17 +370,27 @@ impl<'a> Refiner<'a> {
             keys.sort_unstable();
             let mut changed = 0;
             for (a, b) in keys {
-                let Some(f) = self.flip_candidate(a, b) else {
+                // the valence test first (integers), the geometry only for a flip
+                // that would help
+                let (Some(&t1), Some(&t2)) = (self.edges.get(&(a, b)), self.edges.get(&(b, a)))
+                else {
                     continue;
                 };
-                let (c, d) = (f.2, f.3);
+                let c = Self::third(self.tris[t1 as usize], a, b);
+                let d = Self::third(self.tris[t2 as usize], a, b);
                 let dev = |v: u32, dv: i64| {
                     let x = val[v as usize] + dv - target[v as usize];
                     x * x
                 };
                 let before = dev(a, 0) + dev(b, 0) + dev(c, 0) + dev(d, 0);
                 let after = dev(a, -1) + dev(b, -1) + dev(c, 1) + dev(d, 1);
-                if after < before && self.flip_keeps_angles(a, b, c, d) {
+                if !(after < before) {
+                    continue;
+                }
+                let Some(f) = self.flip_candidate(a, b) else {
+                    continue;
+                };
+                if self.flip_keeps_angles(a, b, c, d) {
                     self.do_flip(a, b, f);
                     val[a as usize] -= 1;
                     val[b as usize] -= 1;
@@ -564,34 +572,50 @@ impl<'a> Refiner<'a> {
             if n == k {
                 return Ok(());
             }
-            let mut ring: Vec<Vec<u32>> = vec![Vec::new(); n - k];
-            let mut fan: Vec<Vec<u32>> = vec![Vec::new(); n - k];
             if self.valence {
                 self.valence_flips(deadline)?;
             }
-            for (t, tri) in self.tris.iter().enumerate() {
-                for (c, &v) in tri.iter().enumerate() {
+            // the triangles of each new vertex, one list after the other
+            // (`fan[start[v - k]..start[v - k + 1]]`)
+            let mut start = vec![0usize; n - k + 1];
+            for tri in &self.tris {
+                for &v in tri {
                     if v as usize >= k {
-                        fan[v as usize - k].push(t as u32);
-                        ring[v as usize - k].push(tri[(c + 1) % 3]);
+                        start[v as usize - k + 1] += 1;
                     }
                 }
             }
+            for i in 0..n - k {
+                start[i + 1] += start[i];
+            }
+            let mut fill = start.clone();
+            let mut fan = vec![0u32; start[n - k]];
+            for (t, tri) in self.tris.iter().enumerate() {
+                for &v in tri {
+                    if v as usize >= k {
+                        fan[fill[v as usize - k]] = t as u32;
+                        fill[v as usize - k] += 1;
+                    }
+                }
+            }
+            // smallest angle of each triangle at the current positions, once known
+            let mut tri_min: Vec<f64> = vec![f64::NAN; self.tris.len()];
+            let mut after_of: Vec<f64> = Vec::new();
             for v in k..n {
-                let nb = &ring[v - k];
-                if nb.is_empty() {
+                let ts = &fan[start[v - k]..start[v - k + 1]];
+                if ts.is_empty() {
                     continue;
                 }
                 let p = self.pos[v];
                 let mut normal = DVec3::ZERO;
-                for &t in &fan[v - k] {
+                for &t in ts {
                     let [a, b, c] = self.tris[t as usize].map(|i| self.pos[i as usize]);
                     normal += (b - a).cross(c - a);
                 }
                 let normal = normal.normalize_or_zero();
                 // mean of the apexes that would make each incident triangle equilateral
                 let (mut target, mut wsum) = (DVec3::ZERO, 0.0);
-                for &t in &fan[v - k] {
+                for &t in ts {
                     let tri = self.tris[t as usize];
                     let Some(c) = tri.iter().position(|&i| i as usize == v) else {
                         continue;
@@ -607,6 +631,16 @@ impl<'a> Refiner<'a> {
                 let mean = if wsum > 0.0 {
                     target / wsum
                 } else {
+                    // the neighbours (each corner after v in its triangles), as the
+                    // uniform Laplacian
+                    let nb: Vec<u32> = ts
+                        .iter()
+                        .filter_map(|&t| {
+                            let tri = self.tris[t as usize];
+                            let c = tri.iter().position(|&i| i as usize == v)?;
+                            Some(tri[(c + 1) % 3])
+                        })
+                        .collect();
                     nb.iter().map(|&w| self.pos[w as usize]).sum::<DVec3>() / nb.len() as f64
                 };
                 let d = mean - p;
@@ -614,12 +648,18 @@ impl<'a> Refiner<'a> {
                 let q = p + d;
                 // keep every incident triangle oriented, and its smallest angle above
                 // the smaller of the current one and 15 degrees
-                let min3 = min_angle;
                 let mut before_min = f64::INFINITY;
                 let mut after_min = f64::INFINITY;
-                for &t in &fan[v - k] {
+                after_of.clear();
+                for &t in ts {
                     let tri = self.tris[t as usize];
-                    let b = tri.map(|i| self.pos[i as usize]);
+                    let before = match tri_min[t as usize] {
+                        m if m.is_nan() => {
+                            let b = tri.map(|i| self.pos[i as usize]);
+                            min_angle(b[0], b[1], b[2])
+                        }
+                        m => m,
+                    };
                     let a = tri.map(|i| {
                         if i as usize == v {
                             q
@@ -627,11 +667,14 @@ impl<'a> Refiner<'a> {
                             self.pos[i as usize]
                         }
                     });
-                    before_min = before_min.min(min3(b[0], b[1], b[2]));
-                    after_min = after_min.min(min3(a[0], a[1], a[2]));
+                    let after = min_angle(a[0], a[1], a[2]);
+                    tri_min[t as usize] = before;
+                    after_of.push(after);
+                    before_min = before_min.min(before);
+                    after_min = after_min.min(after);
                 }
                 let ok = after_min >= before_min.min(SLIVER_GUARD.to_radians())
-                    && fan[v - k].iter().all(|&t| {
+                    && ts.iter().all(|&t| {
                         let tri = self.tris[t as usize];
                         let before = tri.map(|i| self.pos[i as usize]);
                         let after = tri.map(|i| {
@@ -651,6 +694,9 @@ impl<'a> Refiner<'a> {
                     });
                 if ok && q.is_finite() {
                     self.pos[v] = q;
+                    for (&t, &m) in ts.iter().zip(&after_of) {
+                        tri_min[t as usize] = m;
+                    }
                 }
             }
             if !self.valence {
