@@ -384,7 +384,7 @@ impl<'a> Refiner<'a> {
                 };
                 let before = dev(a, 0) + dev(b, 0) + dev(c, 0) + dev(d, 0);
                 let after = dev(a, -1) + dev(b, -1) + dev(c, 1) + dev(d, 1);
-                if !(after < before) {
+                if after >= before {
                     continue;
                 }
                 let Some(f) = self.flip_candidate(a, b) else {
