@@ -284,10 +284,11 @@ fn fill_all(mesh: &mut Mesh, policy: &Policy, degenerate: &mut usize) -> Vec<Hol
 }
 
 /// Phase 1 of [`fill_all`]: the proposals of the holes not skipped (`None` for those),
-/// computed on `policy.limits.threads` threads. Each thread takes the biggest hole not
-/// yet taken (a shared counter over the holes sorted by size, largest first), so a
-/// thread that finishes early never waits while another works through a list of big
-/// holes (a fixed split put two big holes on one thread).
+/// computed on `policy.limits.threads` threads (this one and the others started
+/// here). Each thread takes the biggest hole not yet taken (a shared counter over the
+/// holes sorted by size, largest first), so a thread that finishes early never waits
+/// while another works through a list of big holes (a fixed split put two big holes
+/// on one thread).
 fn propose_all(
     mesh: &Mesh,
     holes: &[Hole],
@@ -305,30 +306,26 @@ fn propose_all(
         n => n,
     }
     .min(order.len());
-    let mut computed: Vec<Option<fill::Proposal>> = vec![None; order.len()];
-    if threads > 1 {
-        // no threads to be had: the same work, serially below
-        if let Ok(pool) = rayon::ThreadPoolBuilder::new().num_threads(threads).build() {
-            let next = AtomicUsize::new(0);
-            let slots: Vec<Mutex<Option<fill::Proposal>>> =
-                order.iter().map(|_| Mutex::new(None)).collect();
-            pool.scope(|s| {
-                for _ in 0..threads {
-                    s.spawn(|_| loop {
-                        let j = next.fetch_add(1, Ordering::Relaxed);
-                        let Some(&i) = order.get(j) else { break };
-                        let p = run(i);
-                        if let Ok(mut slot) = slots[j].lock() {
-                            *slot = Some(p);
-                        }
-                    });
-                }
-            });
-            for (c, m) in computed.iter_mut().zip(slots) {
-                *c = m.into_inner().ok().flatten();
-            }
+    let next = AtomicUsize::new(0);
+    let slots: Vec<Mutex<Option<fill::Proposal>>> =
+        order.iter().map(|_| Mutex::new(None)).collect();
+    let work = || loop {
+        let j = next.fetch_add(1, Ordering::Relaxed);
+        let Some(&i) = order.get(j) else { break };
+        let p = run(i);
+        if let Ok(mut slot) = slots[j].lock() {
+            *slot = Some(p);
         }
-    }
+    };
+    // this thread works too, so the biggest hole starts at once; a thread that cannot
+    // be had leaves its share to the others
+    std::thread::scope(|s| {
+        for _ in 1..threads {
+            let _ = std::thread::Builder::new().spawn_scoped(s, work);
+        }
+        work();
+    });
+    let computed = slots.into_iter().map(|m| m.into_inner().ok().flatten());
     let mut out: Vec<Option<fill::Proposal>> = vec![None; holes.len()];
     for (&i, c) in order.iter().zip(computed) {
         out[i] = Some(c.unwrap_or_else(|| run(i)));

@@ -372,7 +372,7 @@ impl Default for Wavefront {
             mu: 150.0,
             curvature_restoration: true,
             placement: WavefrontPlacement::EdgePlane,
-            max_steps_per_vertex: 200,
+            max_steps_per_vertex: 4,
             merge_distance: 0.5,
             max_boundary_vertices: 2000,
             max_area_ratio: 2.0,

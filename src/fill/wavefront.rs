@@ -2250,15 +2250,18 @@ mod tests {
     /// A hole deeper than a hemisphere (cap of 109 degrees: its surface has 2.95 times
     /// the loop's vector area): the front passes `max_area_ratio` (2.0) and stops with
     /// the runaway failure at once, the other full-front variants are skipped, and a
-    /// residual-closing variant closes the hole with a patch that passes the checks.
-    /// Without the bound the policy's front is not stopped that way.
+    /// residual-closing variant closes the hole with a patch that passes the checks
+    /// (with the front allowed to close the whole hole, `max_steps_per_vertex = 200`;
+    /// the default of 4 closes the residual first, checked at the end). Without the
+    /// bound the policy's front is not stopped that way.
     #[test]
     fn a_front_over_a_deep_hole_stops_as_runaway_and_a_residual_variant_closes_it() {
         let (mesh, _) = Mesh::from_raw(&sphere(3, 1.9));
         let loops = mesh.topo.boundary_loops();
         assert_eq!(loops.len(), 1);
-        let policy = Policy::default();
+        let mut policy = Policy::default();
         assert_eq!(policy.wavefront.max_area_ratio, 2.0);
+        policy.wavefront.max_steps_per_vertex = 200;
         let hole = Hole::new(0, &mesh, loops[0].clone(), &policy);
         let ctx = FillContext {
             mesh: &mesh,
@@ -2282,6 +2285,15 @@ mod tests {
         if let Err(FillError::Failed(e)) = fill_with_stats(&ctx) {
             assert!(!e.starts_with(RUNAWAY), "{e}");
         }
+        // the default: a few rings of front, then the residual, within the bound
+        let default = Policy::default();
+        let ctx = FillContext {
+            policy: &default,
+            ..ctx
+        };
+        let (patch, stats) = fill_with_stats(&ctx).unwrap();
+        assert!(stats.residual_fronts >= 1, "{stats:?}");
+        accept(&mesh, &hole, &patch, &default);
     }
 
     /// Curvature restoration against none, over every curved oracle here: five sphere
