@@ -30,24 +30,43 @@ pub fn tangential_relax(mesh: &Mesh, hole: &Hole, patch: &mut Patch, iterations:
     pos.extend_from_slice(&patch.new_vertices);
     // neighbours of each new vertex (each undirected edge seen twice: dedup), stored
     // one list after the other (`adj[start[j]..start[j + 1]]`), and the triangles
-    // with a new corner: the loop runs 100 times over both
-    let mut nb: Vec<Vec<u32>> = vec![Vec::new(); n - k];
+    // with a new corner: the loop runs many times over both. The lists are grouped by
+    // a counting sort (no vector per vertex), then each is sorted and deduplicated.
+    let m = n - k;
+    let mut count = vec![0usize; m + 1];
+    for t in &patch.triangles {
+        for &v in t {
+            if v as usize >= k {
+                count[v as usize - k + 1] += 2;
+            }
+        }
+    }
+    for j in 0..m {
+        count[j + 1] += count[j];
+    }
+    let mut fill = count.clone();
+    let mut raw = vec![0u32; count[m]];
     for t in &patch.triangles {
         for c in 0..3 {
             let v = t[c] as usize;
             if v >= k {
-                nb[v - k].push(t[(c + 1) % 3]);
-                nb[v - k].push(t[(c + 2) % 3]);
+                raw[fill[v - k]] = t[(c + 1) % 3];
+                raw[fill[v - k] + 1] = t[(c + 2) % 3];
+                fill[v - k] += 2;
             }
         }
     }
-    let mut start = Vec::with_capacity(n - k + 1);
-    let mut adj = Vec::new();
+    let mut start = Vec::with_capacity(m + 1);
+    let mut adj = Vec::with_capacity(raw.len() / 2);
     start.push(0);
-    for mut l in nb {
+    for j in 0..m {
+        let l = &mut raw[count[j]..count[j + 1]];
         l.sort_unstable();
-        l.dedup();
-        adj.extend_from_slice(&l);
+        for (i, &w) in l.iter().enumerate() {
+            if i == 0 || l[i - 1] != w {
+                adj.push(w);
+            }
+        }
         start.push(adj.len());
     }
     let tris: Vec<[u32; 3]> = patch

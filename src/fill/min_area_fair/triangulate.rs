@@ -126,24 +126,33 @@ fn dihedral(n1: DVec3, n2: DVec3) -> f64 {
     1.0 - n1.dot(n2).clamp(-1.0, 1.0)
 }
 
-/// Weight of triangle (a, m, b) alone (loop indices), without dihedral terms.
-fn tri_weight(inp: &LoopInput, a: u32, m: u32, b: u32) -> W {
+/// Weight of triangle (a, m, b) alone (loop indices), without dihedral terms;
+/// `cos_lim` is the cosine of `inp.min_angle` (computed once by the caller).
+fn tri_weight(inp: &LoopInput, cos_lim: f64, a: u32, m: u32, b: u32) -> W {
     let [pa, pm, pb] = [a, m, b].map(|i| inp.pts[i as usize]);
     let area = super::super::geom::tri_area(pa, pm, pb);
-    // the smallest angle is opposite the shortest edge; compare cosines
-    let mut l = [
+    // the smallest angle is opposite the shortest edge; compare cosines (the squared
+    // lengths in order by a three-element sorting network)
+    let (mut s, mut m2, mut g) = (
         (pm - pb).length_squared(),
         (pb - pa).length_squared(),
         (pa - pm).length_squared(),
-    ];
-    l.sort_unstable_by(|x, y| x.total_cmp(y));
-    let [s, m2, g] = l;
+    );
+    if s.total_cmp(&m2).is_gt() {
+        std::mem::swap(&mut s, &mut m2);
+    }
+    if m2.total_cmp(&g).is_gt() {
+        std::mem::swap(&mut m2, &mut g);
+    }
+    if s.total_cmp(&m2).is_gt() {
+        std::mem::swap(&mut s, &mut m2);
+    }
     let cos_min = if m2 > 0.0 && g > 0.0 {
         (m2 + g - s) / (2.0 * (m2 * g).sqrt())
     } else {
         1.0
     };
-    let bad = area.is_nan() || area <= 1e-12 * g || cos_min > inp.min_angle.cos();
+    let bad = area.is_nan() || area <= 1e-12 * g || cos_min > cos_lim;
     W {
         bad: bad as u32,
         dih: 0.0,
@@ -196,6 +205,7 @@ pub fn exact(inp: &LoopInput, idx: &[u32]) -> Result<Vec<[u32; 3]>, FillError> {
         }
     }
     let p = |i: usize| inp.pts[idx[i] as usize];
+    let cos_lim = inp.min_angle.cos();
     for d in 2..n {
         inp.deadline.check()?;
         for i in 0..n - d {
@@ -216,7 +226,7 @@ pub fn exact(inp: &LoopInput, idx: &[u32]) -> Result<Vec<[u32; 3]>, FillError> {
                         continue;
                     }
                 }
-                let mut w = partial.plus(tri_weight(inp, idx[i], idx[m], idx[j]));
+                let mut w = partial.plus(tri_weight(inp, cos_lim, idx[i], idx[m], idx[j]));
                 let nt = if dih {
                     unit_normal(p(i), p(m), p(j))
                 } else {
@@ -392,6 +402,7 @@ fn restricted(inp: &LoopInput) -> Result<Option<Vec<[u32; 3]>>, FillError> {
         best.insert((a, a + 1), (W::ZERO, u32::MAX));
     }
     let dih = inp.dihedral();
+    let cos_lim = inp.min_angle.cos();
     let side_normal = |best: &HashMap<(u32, u32), (W, u32)>, i: u32, j: u32| -> Option<DVec3> {
         if j == i + 1 {
             inp.outside(i, j)
@@ -417,7 +428,7 @@ fn restricted(inp: &LoopInput) -> Result<Option<Vec<[u32; 3]>>, FillError> {
             let (Some(&(wl, _)), Some(&(wr, _))) = (best.get(&(i, m)), best.get(&(m, j))) else {
                 continue;
             };
-            let mut w = wl.plus(wr).plus(tri_weight(inp, i, m, j));
+            let mut w = wl.plus(wr).plus(tri_weight(inp, cos_lim, i, m, j));
             if dih {
                 let nt = unit_normal(
                     inp.pts[i as usize],

@@ -19,7 +19,7 @@ use crate::policy::Policy;
 use glam::DVec3;
 
 /// Relaxation rounds of the refined residual (as `min_area_fair` does before fairing).
-const RELAX_ROUNDS: usize = 8;
+const RELAX_ROUNDS: usize = 2;
 
 /// A front loop to close.
 pub struct Residual<'a> {

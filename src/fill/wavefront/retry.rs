@@ -53,7 +53,16 @@ pub fn first_passing_at(
             deadline: ctx.deadline,
             checker: ctx.checker,
         };
-        match run(at, &sub) {
+        let t = std::time::Instant::now();
+        let made = run(at, &sub);
+        tracing::debug!(
+            hole = ctx.hole.id,
+            variant = *name,
+            ok = made.is_ok(),
+            ms = t.elapsed().as_secs_f64() * 1000.0,
+            "variant run"
+        );
+        match made {
             Ok(p) => {
                 if variants.len() == 1 {
                     return Ok((p, None));
@@ -84,7 +93,15 @@ pub fn first_passing_at(
                         Err(e) => Err((p, e)),
                     }
                 };
-                let (p, e) = match settle(p) {
+                let settled = settle(p);
+                tracing::debug!(
+                    hole = ctx.hole.id,
+                    variant = *name,
+                    passed = settled.is_ok(),
+                    ms = t.elapsed().as_secs_f64() * 1000.0,
+                    "variant relaxed and checked"
+                );
+                let (p, e) = match settled {
                     Ok((p, q)) => return Ok((p, Some(q))),
                     Err(pe) => pe,
                 };
