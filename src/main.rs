@@ -157,6 +157,8 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
         Some(p) => Policy::from_file(p).map_err(|e| Failure(exit::CONFIG, e.to_string()))?,
         None => Policy::default_policy(),
     };
+    // the fill's worker threads start while the input is read
+    holefill::start_workers(&policy);
     let in_format = Format::from_path(&args.input).ok_or_else(|| {
         Failure(
             exit::DATAERR,
