@@ -939,7 +939,11 @@ pub fn quality(pos: &[DVec3], k: usize, patch: &Patch) -> PatchQuality {
         for j in 0..nnew {
             let l = &mut nb[start[j]..start[j + 1]];
             l.sort_unstable();
-            let distinct = l.iter().enumerate().filter(|&(i, &w)| i == 0 || l[i - 1] != w).count();
+            let distinct = l
+                .iter()
+                .enumerate()
+                .filter(|&(i, &w)| i == 0 || l[i - 1] != w)
+                .count();
             six += (distinct == 6) as usize;
         }
         Some(six as f64 / nnew as f64)
