@@ -134,7 +134,11 @@ impl Checker {
     /// [`SCANS_BEFORE_TREE`] the tree is built at once (in parallel for a big mesh).
     pub fn for_checks(mesh: &Mesh, expected: usize) -> Checker {
         let nf = mesh.num_faces();
+        // in parallel (a tenth of a fill on a 70k-face scan, serial before the holes)
+        use rayon::prelude::*;
         let boxes: Vec<FaceBox> = (0..nf)
+            .into_par_iter()
+            .with_min_len(8192)
             .map(|f| {
                 let (lo, hi) = face_box(mesh, f);
                 if lo.is_finite() && hi.is_finite() {
@@ -184,6 +188,30 @@ impl Checker {
         patch: &Patch,
         opts: &Checks,
     ) -> Result<PatchQuality, CheckFailure> {
+        self.check_patch_near(mesh, hole, patch, opts, None)
+    }
+
+    /// The mesh faces whose boxes meet the box of the patch's triangles (what
+    /// [`Checker::check_patch`] tests the patch against), ascending. For checking many
+    /// patches over the same vertices at the same places (edge flips of one patch) with
+    /// [`Checker::check_patch_near`], without finding them again each time.
+    pub fn faces_near(&self, mesh: &Mesh, hole: &[VertexId], patch: &Patch) -> Vec<u32> {
+        let pos = patch_positions(mesh, hole, patch);
+        let (lo, hi) = patch_box(&pos, patch);
+        self.candidates(mesh, lo, hi, true)
+    }
+
+    /// [`Checker::check_patch`] with the candidate mesh faces given (`near`, from
+    /// [`Checker::faces_near`] for a patch whose triangles have the same box; `None`:
+    /// found here). Same result.
+    pub fn check_patch_near(
+        &self,
+        mesh: &Mesh,
+        hole: &[VertexId],
+        patch: &Patch,
+        opts: &Checks,
+        near: Option<&[u32]>,
+    ) -> Result<PatchQuality, CheckFailure> {
         if let Some(v) = hole.iter().find(|v| v.idx() >= mesh.num_vertices()) {
             return Err(CheckFailure::Topology(format!(
                 "hole vertex {v} is not in the mesh"
@@ -193,7 +221,7 @@ impl Checker {
         let pos = patch_positions(mesh, hole, patch);
         check_degenerate(&pos, patch, opts)?;
         if opts.self_intersection {
-            self.check_intersections(mesh, hole, patch, &pos, true)?;
+            self.check_intersections(mesh, hole, patch, &pos, true, near)?;
         }
         Ok(quality(&pos, hole.len(), patch))
     }
@@ -217,7 +245,7 @@ impl Checker {
             return Ok(());
         }
         let pos = patch_positions(mesh, hole, patch);
-        self.check_intersections(mesh, hole, patch, &pos, false)
+        self.check_intersections(mesh, hole, patch, &pos, false, None)
     }
 
     /// Records that the faces in `faces` (indices into the mesh) were added. Faces
@@ -310,6 +338,7 @@ impl Checker {
         patch: &Patch,
         pos: &[DVec3],
         against_base: bool,
+        given: Option<&[u32]>,
     ) -> Result<(), CheckFailure> {
         let k = hole.len();
         if patch.triangles.is_empty() {
@@ -317,14 +346,13 @@ impl Checker {
         }
         // the faces near the patch's box first: against the faces added since the
         // proposal there are usually none, and nothing else is needed
-        let (plo, phi) = patch.triangles.iter().flatten().fold(
-            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-            |(lo, hi), &i| {
-                let p = pos.get(i as usize).copied().unwrap_or(DVec3::NAN);
-                (lo.min(p), hi.max(p))
-            },
-        );
-        let near = self.candidates(mesh, plo, phi, against_base);
+        let near = match given {
+            Some(n) => n.to_vec(),
+            None => {
+                let (plo, phi) = patch_box(pos, patch);
+                self.candidates(mesh, plo, phi, against_base)
+            }
+        };
         if !against_base && near.is_empty() {
             return Ok(());
         }
@@ -398,6 +426,17 @@ impl Checker {
             None => Ok(()),
         }
     }
+}
+
+/// Box of the patch's triangles (`pos`: loop vertices, then new ones).
+fn patch_box(pos: &[DVec3], patch: &Patch) -> (DVec3, DVec3) {
+    patch.triangles.iter().flatten().fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), &i| {
+            let p = pos.get(i as usize).copied().unwrap_or(DVec3::NAN);
+            (lo.min(p), hi.max(p))
+        },
+    )
 }
 
 /// Keys of new patch vertices start here (mesh vertex keys are below 2^32).
@@ -1747,10 +1786,14 @@ mod tests {
             }
             let pos = patch_positions(&m, &hole, &p);
             let want = brute(&p);
-            let got_scan = scan.check_intersections(&m, &hole, &p, &pos, true);
-            let got_tree = tree.check_intersections(&m, &hole, &p, &pos, true);
+            let got_scan = scan.check_intersections(&m, &hole, &p, &pos, true, None);
+            let got_tree = tree.check_intersections(&m, &hole, &p, &pos, true, None);
+            // with the nearby faces found once and given (as the flip repair does)
+            let near = tree.faces_near(&m, &hole, &p);
+            let got_near = tree.check_intersections(&m, &hole, &p, &pos, true, Some(&near));
             assert_eq!(got_scan, want, "round {round}");
             assert_eq!(got_tree, want, "round {round}");
+            assert_eq!(got_near, want, "round {round}");
             outcomes[match &want {
                 Ok(()) => 0,
                 Err(CheckFailure::SelfIntersection(_, o)) if o.starts_with("patch") => 1,

@@ -162,6 +162,8 @@ fn repair_by_flips(
     mut err: CheckFailure,
 ) -> Option<Patch> {
     let mut tried: HashSet<(u32, u32)> = HashSet::default();
+    // flips move no vertex: every trial has the same box, so the same nearby faces
+    let near = checker.faces_near(ctx.mesh, &ctx.hole.vertices, &patch);
     for _ in 0..REPAIR_ROUNDS {
         if ctx.deadline.check().is_err() {
             return None;
@@ -199,7 +201,13 @@ fn repair_by_flips(
                 let mut q = patch.clone();
                 q.triangles[t] = [a, d, cc];
                 q.triangles[u] = [b, cc, d];
-                match checker.check_patch(ctx.mesh, &ctx.hole.vertices, &q, &ctx.policy.checks) {
+                match checker.check_patch_near(
+                    ctx.mesh,
+                    &ctx.hole.vertices,
+                    &q,
+                    &ctx.policy.checks,
+                    Some(&near),
+                ) {
                     Ok(_) => return Some(q),
                     Err(e2) => {
                         let named = culprits(&e2);
