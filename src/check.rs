@@ -134,11 +134,7 @@ impl Checker {
     /// [`SCANS_BEFORE_TREE`] the tree is built at once (in parallel for a big mesh).
     pub fn for_checks(mesh: &Mesh, expected: usize) -> Checker {
         let nf = mesh.num_faces();
-        // in parallel (a tenth of a fill on a 70k-face scan, serial before the holes)
-        use rayon::prelude::*;
         let boxes: Vec<FaceBox> = (0..nf)
-            .into_par_iter()
-            .with_min_len(8192)
             .map(|f| {
                 let (lo, hi) = face_box(mesh, f);
                 if lo.is_finite() && hi.is_finite() {

@@ -208,8 +208,6 @@ fn split_long_edges(mesh: &mut Mesh, factor: f64) -> usize {
 /// profiles and instruction counts of the filling find it by name.)
 #[inline(never)]
 fn fill_all(mesh: &mut Mesh, policy: &Policy, degenerate: &mut usize) -> Vec<HoleReport> {
-    // the workers of `start_workers` stop spinning: they can take jobs from here on
-    FILL_STARTED.store(true, std::sync::atomic::Ordering::Release);
     let loops = mesh.topo.boundary_loops();
     let comp = components(mesh);
     let diag = mesh.bbox_diagonal();
@@ -362,6 +360,8 @@ fn propose_all(
     // this thread works too, so the biggest hole starts at once; the others are jobs
     // on rayon's pool (started early by [`start_workers`], or here on first use); a
     // job that starts late finds the holes taken and leaves at once
+    // the workers of `start_workers` stop spinning and take these jobs
+    FILL_STARTED.store(true, Ordering::Release);
     rayon::in_place_scope(|s| {
         for _ in 1..threads {
             s.spawn(|_| work());
