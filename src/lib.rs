@@ -290,7 +290,8 @@ fn fill_all(mesh: &mut Mesh, policy: &Policy, degenerate: &mut usize) -> Vec<Hol
 /// starts) begins work 2 to 4 ms after the fill starts in about half of the runs on
 /// the bench machine (a virtual machine; measured in `holefill fill`, against
 /// 0.1 ms when it is awake), a fifth of the whole fill of a 10-hole mesh. The cost is
-/// one core busy while the input is read. Optional: without it the pool starts on
+/// one core busy while the input is read; a spinning worker runs the pool's other jobs
+/// (the OBJ reader's) as they come. Optional: without it the pool starts on
 /// first use. Does nothing but spin when the pool is already running.
 pub fn start_workers(policy: &Policy) {
     let threads = match policy.limits.threads {
@@ -308,6 +309,11 @@ pub fn start_workers(policy: &Policy) {
                 while !FILL_STARTED.load(std::sync::atomic::Ordering::Acquire) {
                     std::hint::spin_loop();
                     spins = spins.wrapping_add(1);
+                    // other work for the pool meanwhile (the OBJ reader's pieces) is
+                    // done here, so a spinning worker never holds the reader back
+                    if spins % 64 == 0 {
+                        let _ = rayon::yield_now();
+                    }
                     if spins % 1024 == 0 && t.elapsed() > WARM_SPIN {
                         break;
                     }
