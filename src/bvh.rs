@@ -69,27 +69,38 @@ pub struct Bvh {
     perm: Vec<u32>,
 }
 
-/// Largest `f32` not above `x`.
+/// Largest `f32` not above `x`. Without a branch on the rounding (it goes either way
+/// at random over a mesh's coordinates): the nearest `f32`, moved one step down
+/// when it is above `x` (a step down is the next bit pattern up for a negative, down
+/// for a positive; `+0.0` is never above `x`, as `x` then rounds to `-0.0`).
+#[inline]
 pub(crate) fn f32_down(x: f64) -> f32 {
     let y = x as f32;
-    if (y as f64) > x {
-        step_f32(y, false)
+    let adj = ((y as f64) > x) as u32;
+    let b = y.to_bits();
+    f32::from_bits(if b >> 31 == 1 {
+        b.wrapping_add(adj)
     } else {
-        y
-    }
+        b.wrapping_sub(adj)
+    })
 }
 
-/// Smallest `f32` not below `x`.
+/// Smallest `f32` not below `x` (as [`f32_down`], the other way).
+#[inline]
 pub(crate) fn f32_up(x: f64) -> f32 {
     let y = x as f32;
-    if (y as f64) < x {
-        step_f32(y, true)
+    let adj = ((y as f64) < x) as u32;
+    let b = y.to_bits();
+    f32::from_bits(if b >> 31 == 1 {
+        b.wrapping_sub(adj)
     } else {
-        y
-    }
+        b.wrapping_add(adj)
+    })
 }
 
-/// The next representable `f32` up or down (NaN as is).
+/// The next representable `f32` up or down (NaN as is): what [`f32_down`] and
+/// [`f32_up`] do, step by step (their test's reference).
+#[cfg(test)]
 fn step_f32(y: f32, up: bool) -> f32 {
     if y.is_nan() || (y == f32::INFINITY && up) || (y == f32::NEG_INFINITY && !up) {
         return y;
@@ -422,6 +433,68 @@ pub fn tri_box(t: &[DVec3; 3]) -> (DVec3, DVec3) {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    fn down_ref(x: f64) -> f32 {
+        let y = x as f32;
+        if (y as f64) > x {
+            step_f32(y, false)
+        } else {
+            y
+        }
+    }
+
+    fn up_ref(x: f64) -> f32 {
+        let y = x as f32;
+        if (y as f64) < x {
+            step_f32(y, true)
+        } else {
+            y
+        }
+    }
+
+    #[test]
+    fn f32_rounding_edge_cases() {
+        let tiny = f64::from(f32::from_bits(1));
+        for x in [
+            0.0,
+            -0.0,
+            1e-50,
+            -1e-50,
+            tiny,
+            -tiny,
+            tiny / 3.0,
+            -tiny / 3.0,
+            f64::from(f32::MAX),
+            f64::from(f32::MAX) * 1.5,
+            -f64::from(f32::MAX) * 1.5,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            0.1,
+            -0.1,
+            1.0,
+            -1.0,
+            1.0 + 1e-12,
+            -1.0 - 1e-12,
+        ] {
+            assert_eq!(f32_down(x).to_bits(), down_ref(x).to_bits(), "down {x:e}");
+            assert_eq!(f32_up(x).to_bits(), up_ref(x).to_bits(), "up {x:e}");
+            assert!(
+                f64::from(f32_down(x)) <= x && x <= f64::from(f32_up(x)),
+                "{x:e}"
+            );
+        }
+        assert!(f32_down(f64::NAN).is_nan() && f32_up(f64::NAN).is_nan());
+    }
+
+    proptest! {
+        #[test]
+        fn f32_rounding_matches_the_stepwise_one(bits in any::<u64>()) {
+            let x = f64::from_bits(bits);
+            prop_assume!(!x.is_nan());
+            prop_assert_eq!(f32_down(x).to_bits(), down_ref(x).to_bits());
+            prop_assert_eq!(f32_up(x).to_bits(), up_ref(x).to_bits());
+        }
+    }
 
     fn brute(boxes: &[(DVec3, DVec3)], lo: DVec3, hi: DVec3) -> Vec<usize> {
         (0..boxes.len())

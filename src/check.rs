@@ -35,6 +35,9 @@ use glam::DVec3;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::OnceLock;
 
+mod incremental;
+pub use incremental::{Change, PatchChecks};
+
 /// Why a patch was rejected.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum CheckFailure {
@@ -58,8 +61,14 @@ pub enum CheckFailure {
 /// the smallest failing patch triangle, and for it the smallest other triangle or mesh
 /// face it meets. So results never depend on thread timing or on when a tree was built.
 pub struct Checker {
-    /// Boxes of the faces the mesh had at construction.
-    boxes: Vec<FaceBox>,
+    /// Boxes of the faces the mesh had at construction (computed on first use, or
+    /// by [`Checker::prepare`] on another thread while the first patches are made).
+    boxes: OnceLock<FaceBoxes>,
+    /// Number of faces the mesh had at construction.
+    base_faces: usize,
+    /// Checks expected (the tree is built with the boxes when above
+    /// [`SCANS_BEFORE_TREE`]).
+    expected: usize,
     /// Tree over those faces, once built.
     base: OnceLock<Bvh>,
     /// Scans of `boxes` so far.
@@ -92,11 +101,84 @@ impl FaceBox {
             && (self.lo[2] as f64) <= hi.z
             && lo.z <= (self.hi[2] as f64)
     }
+    /// The box of everything (for a face with a non-finite corner).
+    const EVERYTHING: FaceBox = FaceBox {
+        lo: [f32::NEG_INFINITY; 3],
+        hi: [f32::INFINITY; 3],
+    };
     fn as_f64(&self) -> (DVec3, DVec3) {
         (
             DVec3::new(self.lo[0] as f64, self.lo[1] as f64, self.lo[2] as f64),
             DVec3::new(self.hi[0] as f64, self.hi[1] as f64, self.hi[2] as f64),
         )
+    }
+}
+
+/// The boxes of many faces, one array per bound (`lo.x, lo.y, lo.z, hi.x, hi.y,
+/// hi.z`), so that a scan compares whole blocks of faces at once.
+#[derive(Default)]
+struct FaceBoxes {
+    b: [Vec<f32>; 6],
+}
+
+/// Faces compared at once by [`FaceBoxes::scan`] (a bit mask per block).
+const SCAN_BLOCK: usize = 16;
+
+impl FaceBoxes {
+    fn len(&self) -> usize {
+        self.b[0].len()
+    }
+    fn get(&self, f: usize) -> FaceBox {
+        FaceBox {
+            lo: [self.b[0][f], self.b[1][f], self.b[2][f]],
+            hi: [self.b[3][f], self.b[4][f], self.b[5][f]],
+        }
+    }
+    /// Appends to `out` the faces whose box meets the closed box `[ql, qh]`,
+    /// ascending. Compared in `f32` in blocks of [`SCAN_BLOCK`] faces, without a
+    /// branch per face (the compiler makes vector compares of it).
+    fn scan(&self, ql: [f32; 3], qh: [f32; 3], out: &mut Vec<u32>) {
+        let n = self.len();
+        let [lx, ly, lz, hx, hy, hz] = &self.b;
+        let meets = |f: usize| {
+            (lx[f] <= qh[0])
+                & (ql[0] <= hx[f])
+                & (ly[f] <= qh[1])
+                & (ql[1] <= hy[f])
+                & (lz[f] <= qh[2])
+                & (ql[2] <= hz[f])
+        };
+        let full = n - n % SCAN_BLOCK;
+        let mut base = 0;
+        while base < full {
+            let (lx, ly, lz) = (
+                &lx[base..base + SCAN_BLOCK],
+                &ly[base..base + SCAN_BLOCK],
+                &lz[base..base + SCAN_BLOCK],
+            );
+            let (hx, hy, hz) = (
+                &hx[base..base + SCAN_BLOCK],
+                &hy[base..base + SCAN_BLOCK],
+                &hz[base..base + SCAN_BLOCK],
+            );
+            let mut mask = 0u32;
+            for i in 0..SCAN_BLOCK {
+                let m = (lx[i] <= qh[0])
+                    & (ql[0] <= hx[i])
+                    & (ly[i] <= qh[1])
+                    & (ql[1] <= hy[i])
+                    & (lz[i] <= qh[2])
+                    & (ql[2] <= hz[i]);
+                mask |= (m as u32) << i;
+            }
+            while mask != 0 {
+                let i = mask.trailing_zeros() as usize;
+                out.push((base + i) as u32);
+                mask &= mask - 1;
+            }
+            base += SCAN_BLOCK;
+        }
+        out.extend((full..n).filter(|&f| meets(f)).map(|f| f as u32));
     }
 }
 
@@ -131,45 +213,95 @@ impl Checker {
     }
 
     /// [`Checker::new`] for about `expected` patch checks: with more than
-    /// [`SCANS_BEFORE_TREE`] the tree is built at once (in parallel for a big mesh).
+    /// [`SCANS_BEFORE_TREE`] the tree is built with the boxes. Nothing is computed
+    /// here: the face boxes on first use or by [`Checker::prepare`].
     pub fn for_checks(mesh: &Mesh, expected: usize) -> Checker {
         let nf = mesh.num_faces();
-        let boxes: Vec<FaceBox> = (0..nf)
-            .map(|f| {
-                let (lo, hi) = face_box(mesh, f);
-                if lo.is_finite() && hi.is_finite() {
-                    FaceBox {
-                        lo: lo.to_array().map(f32_down),
-                        hi: hi.to_array().map(f32_up),
-                    }
-                } else {
-                    // widened to everything, as the tree does: always a candidate
-                    FaceBox {
-                        lo: [f32::NEG_INFINITY; 3],
-                        hi: [f32::INFINITY; 3],
-                    }
-                }
-            })
-            .collect();
-        let c = Checker {
-            boxes,
+        Checker {
+            boxes: OnceLock::new(),
+            base_faces: nf,
+            expected,
             base: OnceLock::new(),
             scans: AtomicUsize::new(0),
             levels: Vec::new(),
             tail: Vec::new(),
             tail_max: TAIL,
             next_unseen: nf,
-        };
-        if expected > SCANS_BEFORE_TREE {
-            c.tree();
         }
-        c
+    }
+
+    /// Computes what the checks need of the mesh (`mesh` as given at construction,
+    /// or with faces added since): the face boxes, and the tree when many checks are
+    /// expected. Called by one thread while the others start on the holes; a check
+    /// that comes first computes them itself (or waits for this to finish).
+    pub fn prepare(&self, mesh: &Mesh) {
+        self.boxes(mesh);
+        if self.expected > SCANS_BEFORE_TREE {
+            self.tree(mesh);
+        }
+    }
+
+    /// The boxes of the construction-time faces (computed on first call): each
+    /// vertex's coordinates rounded down and up to `f32` once, then per face the
+    /// smallest and largest of its corners' (rounding is monotone, so that is the
+    /// face's exact box rounded outwards). A face with a non-finite corner (or out of
+    /// range) gets the box of everything, as in the tree: always a candidate.
+    fn boxes(&self, mesh: &Mesh) -> &FaceBoxes {
+        self.boxes.get_or_init(|| {
+            let rounded: Vec<FaceBox> = mesh
+                .positions
+                .iter()
+                .map(|p| {
+                    if p.is_finite() {
+                        FaceBox {
+                            lo: p.to_array().map(f32_down),
+                            hi: p.to_array().map(f32_up),
+                        }
+                    } else {
+                        FaceBox::EVERYTHING
+                    }
+                })
+                .collect();
+            let faces = mesh.topo.faces();
+            let faces = &faces[..self.base_faces.min(faces.len())];
+            let n = faces.len();
+            let mut b: [Vec<f32>; 6] = std::array::from_fn(|_| vec![0.0; n]);
+            let [lx, ly, lz, hx, hy, hz] = &mut b;
+            let slots = lx
+                .iter_mut()
+                .zip(ly.iter_mut())
+                .zip(lz.iter_mut())
+                .zip(hx.iter_mut().zip(hy.iter_mut()).zip(hz.iter_mut()));
+            for (f, (((lx, ly), lz), ((hx, hy), hz))) in faces.iter().zip(slots) {
+                let fb = match (
+                    rounded.get(f[0].idx()),
+                    rounded.get(f[1].idx()),
+                    rounded.get(f[2].idx()),
+                ) {
+                    // no NaN here: plain comparisons (f32::min also handles NaN)
+                    (Some(a), Some(b), Some(c)) => {
+                        let lo = |x: f32, y: f32| if y < x { y } else { x };
+                        let hi = |x: f32, y: f32| if y > x { y } else { x };
+                        FaceBox {
+                            lo: [0, 1, 2].map(|i| lo(lo(a.lo[i], b.lo[i]), c.lo[i])),
+                            hi: [0, 1, 2].map(|i| hi(hi(a.hi[i], b.hi[i]), c.hi[i])),
+                        }
+                    }
+                    _ => FaceBox::EVERYTHING,
+                };
+                (*lx, *ly, *lz) = (fb.lo[0], fb.lo[1], fb.lo[2]);
+                (*hx, *hy, *hz) = (fb.hi[0], fb.hi[1], fb.hi[2]);
+            }
+            FaceBoxes { b }
+        })
     }
 
     /// The tree over the construction-time faces (built on first call).
-    fn tree(&self) -> &Bvh {
-        self.base
-            .get_or_init(|| Bvh::build(self.boxes.len(), |f| self.boxes[f].as_f64()))
+    fn tree(&self, mesh: &Mesh) -> &Bvh {
+        self.base.get_or_init(|| {
+            let boxes = self.boxes(mesh);
+            Bvh::build(boxes.len(), |f| boxes.get(f).as_f64())
+        })
     }
 
     /// Checks a patch for a hole; on success returns its quality.
@@ -275,27 +407,26 @@ impl Checker {
         let mut out: Vec<u32> = Vec::new();
         if with_base {
             let n = self.scans.fetch_add(1, Ordering::Relaxed);
+            let boxes = self.boxes(mesh);
             match self.base.get() {
                 Some(t) => t.query(lo, hi, |f| {
-                    if self.boxes[f].meets(lo, hi) {
+                    if boxes.get(f).meets(lo, hi) {
                         out.push(f as u32);
                     }
                     false
                 }),
-                None if n >= SCANS_BEFORE_TREE => self.tree().query(lo, hi, |f| {
-                    if self.boxes[f].meets(lo, hi) {
+                None if n >= SCANS_BEFORE_TREE => self.tree(mesh).query(lo, hi, |f| {
+                    if boxes.get(f).meets(lo, hi) {
                         out.push(f as u32);
                     }
                     false
                 }),
                 None => {
-                    out.extend(
-                        self.boxes
-                            .iter()
-                            .enumerate()
-                            .filter(|(_, b)| b.meets(lo, hi))
-                            .map(|(f, _)| f as u32),
-                    );
+                    // compared in f32, against the query box rounded outwards: a
+                    // superset of the faces whose box meets it (the few more ones
+                    // are tested exactly like the others, and meet no triangle)
+                    let (ql, qh) = (lo.to_array().map(f32_down), hi.to_array().map(f32_up));
+                    boxes.scan(ql, qh, &mut out);
                     false
                 }
             };
@@ -914,20 +1045,26 @@ pub fn check_degenerate(pos: &[DVec3], patch: &Patch, opts: &Checks) -> Result<(
     let min_angle = opts.min_angle_deg.to_radians();
     for (ti, t) in patch.triangles.iter().enumerate() {
         let [a, b, c] = t.map(|i| pos[i as usize]);
-        let l = (b - a).length().max((c - b).length()).max((a - c).length());
-        let area = geom::tri_area(a, b, c);
-        if area.is_nan() || area <= 1e-12 * l * l {
-            return Err(CheckFailure::Degenerate(ti, format!("area {area:e}")));
-        }
-        let m = geom::smallest_angle(a, b, c);
-        if m < min_angle {
-            return Err(CheckFailure::Degenerate(
-                ti,
-                format!("smallest angle {:.3} deg", m.to_degrees()),
-            ));
+        if let Some(why) = degenerate_reason(a, b, c, min_angle) {
+            return Err(CheckFailure::Degenerate(ti, why));
         }
     }
     Ok(())
+}
+
+/// Why triangle `abc` is degenerate (zero area, or an angle below `min_angle`
+/// radians), `None` when it is not.
+fn degenerate_reason(a: DVec3, b: DVec3, c: DVec3, min_angle: f64) -> Option<String> {
+    let l = (b - a).length().max((c - b).length()).max((a - c).length());
+    let area = geom::tri_area(a, b, c);
+    if area.is_nan() || area <= 1e-12 * l * l {
+        return Some(format!("area {area:e}"));
+    }
+    let m = geom::smallest_angle(a, b, c);
+    if m < min_angle {
+        return Some(format!("smallest angle {:.3} deg", m.to_degrees()));
+    }
+    None
 }
 
 /// Quality of a patch (see [`PatchQuality`]).
@@ -1739,6 +1876,8 @@ mod tests {
         };
         let scan = Checker::new(&m);
         let tree = Checker::for_checks(&m, SCANS_BEFORE_TREE + 1);
+        assert!(tree.base.get().is_none() && tree.boxes.get().is_none());
+        tree.prepare(&m);
         assert!(tree.base.get().is_some());
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
         let mut outcomes = [0usize; 3];
@@ -1799,5 +1938,136 @@ mod tests {
         assert!(outcomes.iter().all(|&n| n > 0), "{outcomes:?}");
         // the scanning checker built its tree once it had scanned enough
         assert!(scan.base.get().is_some());
+    }
+
+    /// [`PatchChecks`] (every failure recorded, changes re-tested incrementally)
+    /// reports what the whole check reports, on random two-apex fans over a hole
+    /// under obstacles: as made, after random edge flips (some kept), and with one
+    /// apex's triangles replaced by a fan over their ring (a vertex dropped, the
+    /// triangles renumbered).
+    #[test]
+    fn incremental_checks_report_what_the_whole_check_reports() {
+        use rand::{Rng, SeedableRng};
+        let mut raw = RawMesh::default();
+        grid(6, 0.0, 0, &HOLE, &mut raw);
+        grid(6, 0.7, 49, &[], &mut raw);
+        let b = raw.positions.len() as u32;
+        raw.positions
+            .extend([v(2.2, 2.2, 0.2), v(2.8, 2.2, 0.2), v(2.5, 2.8, 0.5)]);
+        raw.faces.push([b, b + 1, b + 2]);
+        let (m, _) = Mesh::from_raw(&raw);
+        let hole = hole_at(&m, 0.0);
+        let k = hole.len();
+        let opts = checks();
+        let checker = Checker::new(&m);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let (mut trials, mut kept, mut passed, mut failed) = (0usize, 0usize, 0usize, 0usize);
+        for _ in 0..60 {
+            let mut jitter = |s: f64| {
+                v(
+                    2.5 + rng.random_range(-s..s),
+                    2.5 + rng.random_range(-s..s),
+                    rng.random_range(-0.4..0.9),
+                )
+            };
+            let (a1, a2) = (jitter(0.9), jitter(0.9));
+            let (x, y) = (k as u32, k as u32 + 1);
+            let mut p = Patch {
+                new_vertices: vec![a1, a2],
+                triangles: Vec::new(),
+            };
+            for i in 0..k as u32 {
+                let j = (i + 1) % k as u32;
+                p.triangles
+                    .push([i, j, if i < k as u32 / 2 { x } else { y }]);
+            }
+            let h = k as u32 / 2;
+            p.triangles.push([x, h, y]);
+            p.triangles.push([x, y, 0]);
+            let near = checker.faces_near(&m, &hole, &p);
+            let mut st = PatchChecks::new(&m, &hole, p.clone(), &opts, &near).unwrap();
+            assert_eq!(st.result(), checker.check_patch(&m, &hole, &p, &opts));
+            // the ring of apex y's triangles, closed by a fan from its first vertex
+            {
+                let mut removed = Vec::new();
+                let mut next = std::collections::HashMap::new();
+                for (t, tri) in p.triangles.iter().enumerate() {
+                    if let Some(c) = tri.iter().position(|&w| w == y) {
+                        removed.push(t);
+                        next.insert(tri[(c + 1) % 3], tri[(c + 2) % 3]);
+                    }
+                }
+                let start = tri_start(&p, y);
+                let mut ring = vec![start];
+                while let Some(&n) = next.get(ring.last().unwrap()) {
+                    if n == start || ring.len() > next.len() {
+                        break;
+                    }
+                    ring.push(n);
+                }
+                // from apex x (on the ring): the loop's vertices along a side of
+                // the hole are collinear, a fan from one of them degenerate
+                if let Some(at) = ring.iter().position(|&w| w == x) {
+                    ring.rotate_left(at);
+                }
+                let added: Vec<[u32; 3]> = (1..ring.len() - 1)
+                    .map(|i| [ring[0], ring[i], ring[i + 1]])
+                    .collect();
+                let mut q = Patch {
+                    new_vertices: vec![a1],
+                    triangles: p
+                        .triangles
+                        .iter()
+                        .enumerate()
+                        .filter(|(t, _)| !removed.contains(t))
+                        .map(|(_, t)| *t)
+                        .collect(),
+                };
+                q.triangles.extend(&added);
+                let got = st.replaced(&removed, &added, &q);
+                assert_eq!(got, checker.check_patch(&m, &hole, &q, &opts));
+                if got.is_ok() {
+                    passed += 1;
+                } else {
+                    failed += 1;
+                }
+            }
+            // random flips of interior edges
+            for _ in 0..25 {
+                let cur = st.patch().clone();
+                let t = rng.random_range(0..cur.triangles.len());
+                let c = rng.random_range(0..3);
+                let tri = cur.triangles[t];
+                let (a, b, cc) = (tri[c], tri[(c + 1) % 3], tri[(c + 2) % 3]);
+                let Some(u) = cur
+                    .triangles
+                    .iter()
+                    .position(|o| (0..3).any(|e| o[e] == b && o[(e + 1) % 3] == a))
+                else {
+                    continue;
+                };
+                let Some(&d) = cur.triangles[u].iter().find(|&&w| w != a && w != b) else {
+                    continue;
+                };
+                let (change, q, got) = st.trial(&[t, u], &[[a, d, cc], [b, cc, d]]);
+                assert_eq!(got, checker.check_patch(&m, &hole, &q, &opts));
+                trials += 1;
+                if rng.random_bool(0.5) && st.apply(change) {
+                    kept += 1;
+                    assert_eq!(st.patch(), &q);
+                    assert_eq!(st.result(), checker.check_patch(&m, &hole, &q, &opts));
+                }
+            }
+        }
+        assert!(trials > 500 && kept > 100, "{trials} trials, {kept} kept");
+        assert!(passed > 0 && failed > 0, "{passed} passed, {failed} failed");
+    }
+
+    /// A vertex of the triangle opposite `apex` in the first triangle using it.
+    fn tri_start(p: &Patch, apex: u32) -> u32 {
+        p.triangles
+            .iter()
+            .find_map(|t| t.iter().position(|&w| w == apex).map(|c| t[(c + 1) % 3]))
+            .unwrap()
     }
 }

@@ -209,45 +209,46 @@ fn split_long_edges(mesh: &mut Mesh, factor: f64) -> usize {
 #[inline(never)]
 fn fill_all(mesh: &mut Mesh, policy: &Policy, degenerate: &mut usize) -> Vec<HoleReport> {
     let loops = mesh.topo.boundary_loops();
-    let comp = components(mesh);
     let diag = mesh.bbox_diagonal();
     let holes: Vec<Hole> = loops
         .into_iter()
         .enumerate()
         .map(|(i, l)| Hole::new(i, mesh, l, policy))
         .collect();
-    // longest loop (by perimeter) of each component
-    let loop_comp: Vec<usize> = holes
+    // which holes to fill, and which rule skips the others: the rule as it applies to
+    // a component's longest loop; with `only_longest`, it then holds only for the
+    // longest loop of each component, which needs the components (a walk over every
+    // face) only when the rule would skip some loop
+    let mut skip: Vec<Option<String>> = holes
         .iter()
-        .map(|h| {
-            h.vertices
-                .first()
-                .and_then(|&v| mesh.topo.anchor(v))
-                .map(|a| comp[a.face().idx()])
-                .unwrap_or(usize::MAX)
-        })
+        .map(|hole| border_rule(mesh, hole, policy, diag))
         .collect();
-    let mut longest: std::collections::HashMap<usize, usize> = std::collections::HashMap::new();
-    for (i, h) in holes.iter().enumerate() {
-        let e = longest.entry(loop_comp[i]).or_insert(i);
-        if h.perimeter > holes[*e].perimeter {
-            *e = i;
+    if policy.border.only_longest && skip.iter().any(Option::is_some) {
+        let comp = components(mesh);
+        let loop_comp: Vec<usize> = holes
+            .iter()
+            .map(|h| {
+                h.vertices
+                    .first()
+                    .and_then(|&v| mesh.topo.anchor(v))
+                    .map(|a| comp[a.face().idx()])
+                    .unwrap_or(usize::MAX)
+            })
+            .collect();
+        // longest loop (by perimeter) of each component
+        let mut longest: std::collections::HashMap<usize, usize> = std::collections::HashMap::new();
+        for (i, h) in holes.iter().enumerate() {
+            let e = longest.entry(loop_comp[i]).or_insert(i);
+            if h.perimeter > holes[*e].perimeter {
+                *e = i;
+            }
+        }
+        for (i, s) in skip.iter_mut().enumerate() {
+            if longest.get(&loop_comp[i]) != Some(&i) {
+                *s = None;
+            }
         }
     }
-    // which holes to fill, and which rule skips the others
-    let skip: Vec<Option<String>> = holes
-        .iter()
-        .enumerate()
-        .map(|(i, hole)| {
-            border_rule(
-                mesh,
-                hole,
-                policy,
-                diag,
-                longest.get(&loop_comp[i]) == Some(&i),
-            )
-        })
-        .collect();
     // about one check per hole to fill (more for holes whose first patch fails)
     let to_fill = skip.iter().filter(|s| s.is_none()).count();
     let mut checker = check::Checker::for_checks(mesh, to_fill);
@@ -255,6 +256,14 @@ fn fill_all(mesh: &mut Mesh, policy: &Policy, degenerate: &mut usize) -> Vec<Hol
     // is now (read-only); phase 2, serial in hole order: check each against the
     // patches accepted before it and apply it. The output does not depend on threads.
     let proposals = propose_all(mesh, &holes, &skip, policy, &checker);
+    let (nv, nf) = proposals
+        .iter()
+        .flatten()
+        .filter_map(|p| p.accepted.as_ref())
+        .fold((0, 0), |(v, f), (_, patch, _, _)| {
+            (v + patch.new_vertices.len(), f + patch.triangles.len())
+        });
+    mesh.reserve(nv, nf);
     let mut out = Vec::with_capacity(holes.len());
     for ((hole, rule), proposal) in holes.iter().zip(skip).zip(proposals) {
         if hole.len() < 3 {
@@ -351,13 +360,22 @@ fn propose_all(
         0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
         n => n,
     }
-    .min(order.len());
+    .min(order.len() + 1);
     let next = AtomicUsize::new(0);
     let slots: Vec<Mutex<Option<fill::Proposal>>> =
         order.iter().map(|_| Mutex::new(None)).collect();
+    // job 0 computes the checker's face boxes, so that they are ready (or being
+    // made) when the first patch is checked; the others are the holes
     let work = || loop {
         let j = next.fetch_add(1, Ordering::Relaxed);
-        let Some(&i) = order.get(j) else { break };
+        if j == 0 {
+            if !order.is_empty() {
+                checker.prepare(mesh);
+            }
+            continue;
+        }
+        let Some(&i) = order.get(j - 1) else { break };
+        let j = j - 1;
         let p = run(i);
         if let Ok(mut slot) = slots[j].lock() {
             *slot = Some(p);
@@ -382,18 +400,11 @@ fn propose_all(
     out
 }
 
-/// The outer-border rule: `Some(reason)` when the loop is skipped.
-fn border_rule(
-    mesh: &Mesh,
-    hole: &Hole,
-    policy: &Policy,
-    diag: f64,
-    is_longest: bool,
-) -> Option<String> {
+/// The outer-border rule for a loop that is the longest of its component (with
+/// `border.only_longest`, the caller clears it for the others): `Some(reason)` when
+/// the loop is skipped.
+fn border_rule(mesh: &Mesh, hole: &Hole, policy: &Policy, diag: f64) -> Option<String> {
     let b = &policy.border;
-    if b.only_longest && !is_longest {
-        return None;
-    }
     if b.max_vertices > 0 && hole.len() > b.max_vertices {
         return Some(format!(
             "outer border: {} boundary vertices > border.max_vertices = {}",

@@ -222,7 +222,16 @@ impl Mesh {
                 }
             }
         }
-        let mut out_faces: Vec<[VertexId; 3]> = Vec::with_capacity(nf);
+        // room for the patches that will close the holes, so that filling appends
+        // without moving the arrays: about 8 faces per boundary edge (the bench's
+        // holes add 4 to 8), at most a quarter of the mesh more
+        let paired = pairs.iter().enumerate().filter(|&(i, _)| !cut[i]).count();
+        let room_faces = (nf * 3)
+            .saturating_sub(2 * paired)
+            .saturating_mul(8)
+            .min(nf / 4 + 64);
+        let room_vertices = room_faces / 2 + 8;
+        let mut out_faces: Vec<[VertexId; 3]> = Vec::with_capacity(nf + room_faces);
         for (fi, f) in faces.iter().enumerate() {
             if flip[fi] == Some(true) {
                 rep.flipped_faces += 1;
@@ -238,7 +247,8 @@ impl Mesh {
                     .find(|&c| faces[f][c] == a && faces[f][(c + 1) % 3] == b)
                     .map(|c| (f * 3 + c) as u32)
             };
-        let mut twin: Vec<Option<HalfedgeId>> = vec![None; nf * 3];
+        let mut twin: Vec<Option<HalfedgeId>> = Vec::with_capacity((nf + room_faces) * 3);
+        twin.resize(nf * 3, None);
         for (pi, &(a, b)) in pairs.iter().enumerate() {
             if cut[pi] {
                 continue;
@@ -263,14 +273,18 @@ impl Mesh {
         drop(pairs);
 
         // 4. split vertices with several fans
-        let mut positions = raw.positions.clone();
-        let mut colors = raw.colors.clone();
-        if let Some(c) = colors.as_mut() {
-            c.resize(nv, [0.5, 0.5, 0.5]);
-        }
-        let mut origin: Vec<Option<VertexId>> =
-            (0..nv).map(|i| Some(VertexId::from_idx(i))).collect();
-        let mut anchor: Vec<Option<HalfedgeId>> = vec![None; nv];
+        let mut positions = Vec::with_capacity(nv + room_vertices);
+        positions.extend_from_slice(&raw.positions);
+        let mut colors = raw.colors.as_ref().map(|c| {
+            let mut v = Vec::with_capacity(nv + room_vertices);
+            v.extend_from_slice(c);
+            v.resize(nv, [0.5, 0.5, 0.5]);
+            v
+        });
+        let mut origin: Vec<Option<VertexId>> = Vec::with_capacity(nv + room_vertices);
+        origin.extend((0..nv).map(|i| Some(VertexId::from_idx(i))));
+        let mut anchor: Vec<Option<HalfedgeId>> = Vec::with_capacity(nv + room_vertices);
+        anchor.resize(nv, None);
         let mut visited = vec![false; nf * 3];
         let mut topo = Topology {
             faces: out_faces,

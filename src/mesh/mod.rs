@@ -492,6 +492,19 @@ impl Mesh {
         let n = self.positions.len();
         self.topo.add_faces(faces, n)
     }
+    /// Makes room for `vertices` more vertices and `faces` more faces, so that
+    /// adding the patches of a file's holes moves the arrays once, not once per
+    /// doubling (an append to a 70,000-face mesh copies it: 1 ms on the bench).
+    pub fn reserve(&mut self, vertices: usize, faces: usize) {
+        self.positions.reserve(vertices);
+        self.origin.reserve(vertices);
+        if let Some(c) = self.colors.as_mut() {
+            c.reserve(vertices);
+        }
+        self.topo.anchor.reserve(vertices);
+        self.topo.faces.reserve(faces);
+        self.topo.twin.reserve(faces * 3);
+    }
     /// Removes the last `n` vertices (used to undo a rejected patch's vertices,
     /// which no face references).
     pub fn truncate_vertices(&mut self, n: usize) {

@@ -13,7 +13,7 @@
 //! this wrapper; the list is fixed, so the output stays deterministic.
 
 use super::super::{FillContext, FillError, Patch};
-use crate::check::{CheckFailure, Checker};
+use crate::check::{CheckFailure, Checker, PatchChecks};
 use crate::fasthash::{HashMap, HashSet};
 use crate::fill::relax::{tangential_relax, RELAX_STEP};
 use crate::policy::Policy;
@@ -73,8 +73,7 @@ pub fn first_passing_at(
                 };
                 let check =
                     |q: &Patch| c.check_patch(ctx.mesh, &ctx.hole.vertices, q, &ctx.policy.checks);
-                // relaxed if that passes, else as it is
-                let settle = |p: Patch| -> Result<(Patch, PatchQuality), (Patch, CheckFailure)> {
+                let relax = |p: &Patch| {
                     let mut relaxed = p.clone();
                     tangential_relax(
                         ctx.mesh,
@@ -83,35 +82,50 @@ pub fn first_passing_at(
                         ctx.policy.fair.tangential_relax,
                         RELAX_STEP,
                     );
-                    if relaxed != p {
+                    relaxed
+                };
+                // relaxed if that passes, else as it is
+                let relaxed = relax(&p);
+                if relaxed != p {
+                    if let Ok(q) = check(&relaxed) {
+                        trace_settled(ctx, name, t, true);
+                        return Ok((relaxed, Some(q)));
+                    }
+                }
+                // as made, with every failure recorded: the repairs below re-test
+                // only the triangles they change
+                let near = c.faces_near(ctx.mesh, &ctx.hole.vertices, &p);
+                let state = PatchChecks::new(
+                    ctx.mesh,
+                    &ctx.hole.vertices,
+                    p.clone(),
+                    &ctx.policy.checks,
+                    &near,
+                );
+                let result = match &state {
+                    Some(s) => s.result(),
+                    None => check(&p),
+                };
+                #[cfg(debug_assertions)]
+                debug_assert_eq!(result, check(&p), "incremental and whole checks disagree");
+                trace_settled(ctx, name, t, result.is_ok());
+                let e = match result {
+                    Ok(q) => return Ok((p, Some(q))),
+                    Err(e) => e,
+                };
+                let repaired = state.and_then(|s| {
+                    repair_by_flips(ctx, c, s.clone(), e.clone())
+                        .or_else(|| repair_by_retriangulation(ctx, c, &s, e.clone()))
+                });
+                if let Some((r, known)) = repaired {
+                    // the repair passed the checks: relaxed if that passes too
+                    let relaxed = relax(&r);
+                    if relaxed != r {
                         if let Ok(q) = check(&relaxed) {
-                            return Ok((relaxed, q));
+                            return Ok((relaxed, Some(q)));
                         }
                     }
-                    match check(&p) {
-                        Ok(q) => Ok((p, q)),
-                        Err(e) => Err((p, e)),
-                    }
-                };
-                let settled = settle(p);
-                tracing::debug!(
-                    hole = ctx.hole.id,
-                    variant = *name,
-                    passed = settled.is_ok(),
-                    ms = t.elapsed().as_secs_f64() * 1000.0,
-                    "variant relaxed and checked"
-                );
-                let (p, e) = match settled {
-                    Ok((p, q)) => return Ok((p, Some(q))),
-                    Err(pe) => pe,
-                };
-                let repaired = repair_by_flips(ctx, c, p.clone(), e.clone())
-                    .or_else(|| repair_by_retriangulation(ctx, c, p, e.clone()));
-                if let Some(r) = repaired {
-                    // the repair passed the checks, so one of the two does
-                    if let Ok((r, q)) = settle(r) {
-                        return Ok((r, Some(q)));
-                    }
+                    return Ok((r, Some(known)));
                 }
                 reasons.push(format!("{name}: {e}"));
             }
@@ -126,6 +140,17 @@ pub fn first_passing_at(
         "every variant failed ({})",
         reasons.join("; ")
     )))
+}
+
+/// Logs how long a variant took to be made, relaxed and checked.
+fn trace_settled(ctx: &FillContext, name: &str, t: std::time::Instant, passed: bool) {
+    tracing::debug!(
+        hole = ctx.hole.id,
+        variant = name,
+        passed,
+        ms = t.elapsed().as_secs_f64() * 1000.0,
+        "variant relaxed and checked"
+    );
 }
 
 /// Rounds of [`repair_by_flips`].
@@ -158,12 +183,12 @@ fn culprits(e: &CheckFailure) -> Vec<usize> {
 fn repair_by_flips(
     ctx: &FillContext,
     checker: &Checker,
-    mut patch: Patch,
+    mut state: PatchChecks,
     mut err: CheckFailure,
-) -> Option<Patch> {
+) -> Option<(Patch, PatchQuality)> {
+    let _ = checker; // the whole check, to compare with in debug builds
     let mut tried: HashSet<(u32, u32)> = HashSet::default();
-    // flips move no vertex: every trial has the same box, so the same nearby faces
-    let near = checker.faces_near(ctx.mesh, &ctx.hole.vertices, &patch);
+    // flips move no vertex, and a trial re-tests only its two new triangles
     for _ in 0..REPAIR_ROUNDS {
         if ctx.deadline.check().is_err() {
             return None;
@@ -172,13 +197,14 @@ fn repair_by_flips(
         if bad.is_empty() {
             return None;
         }
+        let patch = state.patch();
         let mut owner: HashMap<(u32, u32), usize> = HashMap::default();
         for (t, tri) in patch.triangles.iter().enumerate() {
             for c in 0..3 {
                 owner.insert((tri[c], tri[(c + 1) % 3]), t);
             }
         }
-        let mut progressed = false;
+        let mut kept = None;
         'search: for &t in &bad {
             let Some(&tri) = patch.triangles.get(t) else {
                 continue;
@@ -198,33 +224,31 @@ fn repair_by_flips(
                 if !tried.insert((a.min(b), a.max(b))) {
                     continue;
                 }
-                let mut q = patch.clone();
-                q.triangles[t] = [a, d, cc];
-                q.triangles[u] = [b, cc, d];
-                match checker.check_patch_near(
-                    ctx.mesh,
-                    &ctx.hole.vertices,
-                    &q,
-                    &ctx.policy.checks,
-                    Some(&near),
-                ) {
-                    Ok(_) => return Some(q),
+                let (change, q, result) = state.trial(&[t, u], &[[a, d, cc], [b, cc, d]]);
+                #[cfg(debug_assertions)]
+                debug_assert_eq!(
+                    result,
+                    checker.check_patch(ctx.mesh, &ctx.hole.vertices, &q, &ctx.policy.checks),
+                    "incremental and whole checks disagree on a flip"
+                );
+                match result {
+                    Ok(quality) => return Some((q, quality)),
                     Err(e2) => {
                         let named = culprits(&e2);
                         // progress: the flipped pair is no longer what fails
                         if !named.is_empty() && !named.iter().any(|x| *x == t || *x == u) {
-                            patch = q;
-                            err = e2;
-                            progressed = true;
+                            kept = Some((change, e2));
                             break 'search;
                         }
                     }
                 }
             }
         }
-        if !progressed {
+        let (change, e2) = kept?;
+        if !state.apply(change) {
             return None;
         }
+        err = e2;
     }
     None
 }
@@ -241,10 +265,12 @@ const RETRIANGULATE_ROUNDS: usize = 6;
 fn repair_by_retriangulation(
     ctx: &FillContext,
     checker: &Checker,
-    patch: Patch,
+    state: &PatchChecks,
     err: CheckFailure,
-) -> Option<Patch> {
+) -> Option<(Patch, PatchQuality)> {
     use super::super::min_area_fair::{forbidden_chords, triangulate};
+    let _ = checker; // the whole check, to compare with in debug builds
+    let patch = state.patch();
     let k = ctx.hole.len();
     let seeds = culprits(&err);
     if seeds.is_empty() {
@@ -391,11 +417,19 @@ fn repair_by_retriangulation(
             new_vertices,
             triangles,
         };
-        if checker
-            .check_patch(ctx.mesh, &ctx.hole.vertices, &q, &ctx.policy.checks)
-            .is_ok()
-        {
-            return Some(q);
+        // the triangles kept were tested already: only the fill's are tested here
+        let mut removed: Vec<usize> = region.iter().copied().collect();
+        removed.sort_unstable();
+        let added: Vec<[u32; 3]> = fill.iter().map(|t| t.map(|i| ring[i as usize])).collect();
+        let result = state.replaced(&removed, &added, &q);
+        #[cfg(debug_assertions)]
+        debug_assert_eq!(
+            result,
+            checker.check_patch(ctx.mesh, &ctx.hole.vertices, &q, &ctx.policy.checks),
+            "incremental and whole checks disagree on a re-triangulation"
+        );
+        if let Ok(quality) = result {
+            return Some((q, quality));
         }
     }
     None
@@ -472,12 +506,19 @@ mod tests {
             .check_patch(&mesh, &hole.vertices, &patch, &policy.checks)
             .unwrap_err();
         assert!(!culprits(&err).is_empty(), "{err}");
-        let fixed = repair_by_flips(&ctx, &checker, patch.clone(), err.clone())
-            .or_else(|| repair_by_retriangulation(&ctx, &checker, patch.clone(), err))
+        let near = checker.faces_near(&mesh, &hole.vertices, &patch);
+        let state =
+            PatchChecks::new(&mesh, &hole.vertices, patch.clone(), &policy.checks, &near).unwrap();
+        assert_eq!(state.result(), Err(err.clone()));
+        let (fixed, q) = repair_by_flips(&ctx, &checker, state.clone(), err.clone())
+            .or_else(|| repair_by_retriangulation(&ctx, &checker, &state, err))
             .expect("repaired");
-        checker
-            .check_patch(&mesh, &hole.vertices, &fixed, &policy.checks)
-            .unwrap();
+        assert_eq!(
+            q,
+            checker
+                .check_patch(&mesh, &hole.vertices, &fixed, &policy.checks)
+                .unwrap()
+        );
         assert!(fixed.new_vertices.len() < patch.new_vertices.len());
         assert!(fixed.new_vertices.iter().all(|p| p.z.abs() < 1e-12));
         // a patch that passes is returned by the wrapper relaxed as the dispatcher
