@@ -83,7 +83,10 @@ pub struct Checker {
     next_unseen: usize,
 }
 
-/// A face's box in `f32`, rounded outwards (so it holds the exact box).
+/// A face's box in `f32`: the bounds of its corners rounded to the nearest `f32`.
+/// Rounding is monotone, so a face whose exact box meets a box `[lo, hi]` meets
+/// `[f32_down(lo), f32_up(hi)]` here too ([`FaceBox::meets`]: a superset, tested
+/// exactly afterwards); [`FaceBox::as_f64`] widens it by a step to hold the exact box.
 #[derive(Clone, Copy, Debug)]
 struct FaceBox {
     lo: [f32; 3],
@@ -91,27 +94,32 @@ struct FaceBox {
 }
 
 impl FaceBox {
-    /// Meets the closed box `[lo, hi]`.
+    /// Meets the closed box `[ql, qh]` (a query box rounded outwards to `f32`).
     #[inline]
-    fn meets(&self, lo: DVec3, hi: DVec3) -> bool {
-        (self.lo[0] as f64) <= hi.x
-            && lo.x <= (self.hi[0] as f64)
-            && (self.lo[1] as f64) <= hi.y
-            && lo.y <= (self.hi[1] as f64)
-            && (self.lo[2] as f64) <= hi.z
-            && lo.z <= (self.hi[2] as f64)
+    fn meets(&self, ql: [f32; 3], qh: [f32; 3]) -> bool {
+        (self.lo[0] <= qh[0])
+            & (ql[0] <= self.hi[0])
+            & (self.lo[1] <= qh[1])
+            & (ql[1] <= self.hi[1])
+            & (self.lo[2] <= qh[2])
+            & (ql[2] <= self.hi[2])
     }
     /// The box of everything (for a face with a non-finite corner).
     const EVERYTHING: FaceBox = FaceBox {
         lo: [f32::NEG_INFINITY; 3],
         hi: [f32::INFINITY; 3],
     };
+    /// A box holding the face's exact box (one `f32` step out from the rounded one).
     fn as_f64(&self) -> (DVec3, DVec3) {
-        (
-            DVec3::new(self.lo[0] as f64, self.lo[1] as f64, self.lo[2] as f64),
-            DVec3::new(self.hi[0] as f64, self.hi[1] as f64, self.hi[2] as f64),
-        )
+        let lo = self.lo.map(|x| x.next_down() as f64);
+        let hi = self.hi.map(|x| x.next_up() as f64);
+        (DVec3::from_array(lo), DVec3::from_array(hi))
     }
+}
+
+/// `[lo, hi]` rounded outwards to `f32`, for [`FaceBox::meets`].
+fn query_f32(lo: DVec3, hi: DVec3) -> ([f32; 3], [f32; 3]) {
+    (lo.to_array().map(f32_down), hi.to_array().map(f32_up))
 }
 
 /// The boxes of many faces, one array per bound (`lo.x, lo.y, lo.z, hi.x, hi.y,
@@ -241,29 +249,14 @@ impl Checker {
         }
     }
 
-    /// The boxes of the construction-time faces (computed on first call): each
-    /// vertex's coordinates rounded down and up to `f32` once, then per face the
-    /// smallest and largest of its corners' (rounding is monotone, so that is the
-    /// face's exact box rounded outwards). A face with a non-finite corner (or out of
-    /// range) gets the box of everything, as in the tree: always a candidate.
+    /// The boxes of the construction-time faces (computed on first call; see
+    /// [`FaceBox`]). A face with a non-finite corner (or out of range) gets the box
+    /// of everything, as in the tree: always a candidate.
     fn boxes(&self, mesh: &Mesh) -> &FaceBoxes {
         self.boxes.get_or_init(|| {
-            let rounded: Vec<FaceBox> = mesh
-                .positions
-                .iter()
-                .map(|p| {
-                    if p.is_finite() {
-                        FaceBox {
-                            lo: p.to_array().map(f32_down),
-                            hi: p.to_array().map(f32_up),
-                        }
-                    } else {
-                        FaceBox::EVERYTHING
-                    }
-                })
-                .collect();
             let faces = mesh.topo.faces();
             let faces = &faces[..self.base_faces.min(faces.len())];
+            let pos = &mesh.positions;
             let n = faces.len();
             let mut b: [Vec<f32>; 6] = std::array::from_fn(|_| vec![0.0; n]);
             let [lx, ly, lz, hx, hy, hz] = &mut b;
@@ -274,17 +267,24 @@ impl Checker {
                 .zip(hx.iter_mut().zip(hy.iter_mut()).zip(hz.iter_mut()));
             for (f, (((lx, ly), lz), ((hx, hy), hz))) in faces.iter().zip(slots) {
                 let fb = match (
-                    rounded.get(f[0].idx()),
-                    rounded.get(f[1].idx()),
-                    rounded.get(f[2].idx()),
+                    pos.get(f[0].idx()),
+                    pos.get(f[1].idx()),
+                    pos.get(f[2].idx()),
                 ) {
-                    // no NaN here: plain comparisons (f32::min also handles NaN)
-                    (Some(a), Some(b), Some(c)) => {
-                        let lo = |x: f32, y: f32| if y < x { y } else { x };
-                        let hi = |x: f32, y: f32| if y > x { y } else { x };
-                        FaceBox {
-                            lo: [0, 1, 2].map(|i| lo(lo(a.lo[i], b.lo[i]), c.lo[i])),
-                            hi: [0, 1, 2].map(|i| hi(hi(a.hi[i], b.hi[i]), c.hi[i])),
+                    (Some(&a), Some(&b), Some(&c)) => {
+                        // plain comparisons (f64::min also handles NaN); a NaN, an
+                        // infinity or a coordinate beyond the f32 range gives a
+                        // non-finite bound, and the box of everything
+                        let lo = |x: f64, y: f64| if y < x { y } else { x };
+                        let hi = |x: f64, y: f64| if y > x { y } else { x };
+                        let fb = FaceBox {
+                            lo: [0, 1, 2].map(|i| lo(lo(a[i], b[i]), c[i]) as f32),
+                            hi: [0, 1, 2].map(|i| hi(hi(a[i], b[i]), c[i]) as f32),
+                        };
+                        if fb.lo.iter().chain(&fb.hi).all(|x| x.is_finite()) {
+                            fb
+                        } else {
+                            FaceBox::EVERYTHING
                         }
                     }
                     _ => FaceBox::EVERYTHING,
@@ -408,24 +408,24 @@ impl Checker {
         if with_base {
             let n = self.scans.fetch_add(1, Ordering::Relaxed);
             let boxes = self.boxes(mesh);
+            // compared in f32, against the query box rounded outwards: a superset of
+            // the faces whose box meets it (the few more ones are tested exactly
+            // like the others, and meet no triangle)
+            let (ql, qh) = query_f32(lo, hi);
             match self.base.get() {
                 Some(t) => t.query(lo, hi, |f| {
-                    if boxes.get(f).meets(lo, hi) {
+                    if boxes.get(f).meets(ql, qh) {
                         out.push(f as u32);
                     }
                     false
                 }),
                 None if n >= SCANS_BEFORE_TREE => self.tree(mesh).query(lo, hi, |f| {
-                    if boxes.get(f).meets(lo, hi) {
+                    if boxes.get(f).meets(ql, qh) {
                         out.push(f as u32);
                     }
                     false
                 }),
                 None => {
-                    // compared in f32, against the query box rounded outwards: a
-                    // superset of the faces whose box meets it (the few more ones
-                    // are tested exactly like the others, and meet no triangle)
-                    let (ql, qh) = (lo.to_array().map(f32_down), hi.to_array().map(f32_up));
                     boxes.scan(ql, qh, &mut out);
                     false
                 }

@@ -69,11 +69,11 @@ pub fn tangential_relax(mesh: &Mesh, hole: &Hole, patch: &mut Patch, iterations:
         }
         start.push(adj.len());
     }
-    let tris: Vec<[u32; 3]> = patch
+    let tris: Vec<[usize; 3]> = patch
         .triangles
         .iter()
-        .copied()
         .filter(|t| t.iter().any(|&i| i as usize >= k))
+        .map(|t| t.map(|i| i as usize))
         .collect();
     let inv_deg: Vec<f64> = (0..n - k)
         .map(|j| match start[j + 1] - start[j] {
@@ -83,16 +83,16 @@ pub fn tangential_relax(mesh: &Mesh, hole: &Hole, patch: &mut Patch, iterations:
         .collect();
     // two buffers (loop vertices in both), swapped after each Jacobi step
     let mut next = pos.clone();
-    let mut normal = vec![DVec3::ZERO; n - k];
+    // one normal per vertex, loop vertices included (theirs are not used): each
+    // triangle adds to its three corners without a test
+    let mut normal = vec![DVec3::ZERO; n];
     for _ in 0..iterations {
         normal.fill(DVec3::ZERO);
         for t in &tris {
-            let [a, b, c] = t.map(|i| pos[i as usize]);
+            let [a, b, c] = t.map(|i| pos[i]);
             let fnrm = (b - a).cross(c - a);
             for &i in t {
-                if let Some(nv) = (i as usize).checked_sub(k).and_then(|j| normal.get_mut(j)) {
-                    *nv += fnrm;
-                }
+                normal[i] += fnrm;
             }
         }
         for (j, (w, out)) in inv_deg.iter().zip(&mut next[k..]).enumerate() {
@@ -105,7 +105,7 @@ pub fn tangential_relax(mesh: &Mesh, hole: &Hole, patch: &mut Patch, iterations:
             for &i in &adj[start[j]..start[j + 1]] {
                 c += pos[i as usize];
             }
-            let nrm = normal[j].normalize_or_zero();
+            let nrm = normal[k + j].normalize_or_zero();
             let d = c * *w - p;
             let moved = p + step * (d - nrm * nrm.dot(d));
             *out = if moved.is_finite() { moved } else { p };

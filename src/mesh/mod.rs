@@ -134,10 +134,25 @@ impl Topology {
     /// `l[i] -> l[i+1]` run opposite to the existing face's half-edge, so a patch
     /// triangle `(l[i], l[i+1], x)` is oriented like the surrounding surface.
     pub fn boundary_loops(&self) -> Vec<Vec<VertexId>> {
-        let mut seen = vec![false; self.twin.len()];
+        // the boundary half-edges already walked (a few among many: a set, not a
+        // flag per half-edge, which would be most of this walk's cost)
+        let mut seen: crate::fasthash::HashSet<u32> = Default::default();
         let mut loops = Vec::new();
-        for (i, t) in self.twin.iter().enumerate() {
-            if t.is_some() || seen[i] {
+        // blocks of half-edges all with a twin (nearly all of a mesh) skipped at once
+        let open: Vec<usize> = self
+            .twin
+            .chunks(16)
+            .enumerate()
+            .filter(|(_, c)| !c.iter().fold(true, |all, t| all & t.is_some()))
+            .flat_map(|(b, c)| {
+                c.iter()
+                    .enumerate()
+                    .filter(|(_, t)| t.is_none())
+                    .map(move |(i, _)| b * 16 + i)
+            })
+            .collect();
+        for i in open {
+            if seen.contains(&(i as u32)) {
                 continue;
             }
             // face half-edge a -> b; the hole runs b -> a -> ...
@@ -146,7 +161,7 @@ impl Topology {
             let mut h = start;
             let mut guard = 0usize;
             loop {
-                seen[h.0 as usize] = true;
+                seen.insert(h.0);
                 let a = self.from(h);
                 lp.push(a);
                 match self.incoming_boundary(a) {
@@ -177,7 +192,7 @@ impl Topology {
         }
         let mut open: HashMap<(VertexId, VertexId), HalfedgeId> =
             HashMap::with_capacity_and_hasher(new.len() * 3, Default::default());
-        let mut touched: Vec<VertexId> = Vec::new();
+        let mut touched: Vec<VertexId> = Vec::with_capacity(new.len() * 3);
         for f in new {
             for &v in f {
                 touched.push(v);
@@ -186,7 +201,8 @@ impl Topology {
         touched.sort_unstable();
         touched.dedup();
         // existing directed edges around the touched vertices
-        let mut existing: HashMap<(VertexId, VertexId), HalfedgeId> = HashMap::default();
+        let mut existing: HashMap<(VertexId, VertexId), HalfedgeId> =
+            HashMap::with_capacity_and_hasher(touched.len() * 4, Default::default());
         for &v in &touched {
             if v.idx() >= self.anchor.len() {
                 return Err(format!("vertex {v} out of range"));
@@ -213,7 +229,7 @@ impl Topology {
                 open.insert(key, HalfedgeId((base + fi as u32) * 3 + c as u32));
             }
         }
-        let mut links: Vec<(HalfedgeId, HalfedgeId)> = Vec::new();
+        let mut links: Vec<(HalfedgeId, HalfedgeId)> = Vec::with_capacity(open.len() / 2 + 1);
         for (&(a, b), &h) in &open {
             if let Some(&t) = open.get(&(b, a)) {
                 if h.0 < t.0 {
