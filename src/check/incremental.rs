@@ -67,6 +67,8 @@ pub struct PatchChecks<'a> {
     pp: Vec<(usize, usize)>,
     /// Failing (patch triangle, mesh face) pairs, ascending.
     pm: Vec<(usize, u32)>,
+    /// The topology check of the patch as it is now.
+    topology: Result<(), CheckFailure>,
 }
 
 /// A change to a [`PatchChecks`]: triangles replaced, with what they fail.
@@ -123,7 +125,9 @@ impl<'a> PatchChecks<'a> {
             degenerate: Vec::new(),
             pp: Vec::new(),
             pm: Vec::new(),
+            topology: Ok(()),
         };
+        s.topology = check_topology(mesh, hole, &s.patch);
         let min_angle = opts.min_angle_deg.to_radians();
         s.tris = s.patch.triangles.iter().map(|t| s.tri(t)).collect();
         s.degenerate = s
@@ -191,7 +195,7 @@ impl<'a> PatchChecks<'a> {
 
     /// What [`super::Checker::check_patch_near`] says of the patch as it is now.
     pub fn result(&self) -> Result<PatchQuality, CheckFailure> {
-        check_topology(self.mesh, self.hole, &self.patch)?;
+        self.topology.clone()?;
         if let Some((i, r)) = self
             .degenerate
             .iter()
@@ -324,7 +328,13 @@ impl<'a> PatchChecks<'a> {
             pp: Vec::new(),
             pm: Vec::new(),
         };
-        if let Err(e) = check_topology(self.mesh, self.hole, &q) {
+        let topology = match self.flipped_edge(at, new) {
+            Some((c, d)) => self.flip_topology(c, d),
+            None => check_topology(self.mesh, self.hole, &q),
+        };
+        #[cfg(debug_assertions)]
+        debug_assert_eq!(topology, check_topology(self.mesh, self.hole, &q));
+        if let Err(e) = topology {
             return (change, q, Err(e));
         }
         let min_angle = self.opts.min_angle_deg.to_radians();
@@ -398,12 +408,64 @@ impl<'a> PatchChecks<'a> {
         (change, q, Ok(quality))
     }
 
+    /// `Some((c, d))` when replacing triangles `at` by `new` flips an interior edge
+    /// of a patch that passes the topology check (`[a, b, c]` and `[b, a, d]` become
+    /// `[a, d, c]` and `[b, c, d]`, with no edge `c-d` yet): the patch then stays a
+    /// disk closing the loop (the same vertices, edges and faces but for `a-b`
+    /// replaced by `c-d`), and only the new edge can fail the check.
+    fn flipped_edge(&self, at: &[usize], new: &[[u32; 3]]) -> Option<(u32, u32)> {
+        if self.topology.is_err() || at.len() != 2 || new.len() != 2 || at[0] == at[1] {
+            return None;
+        }
+        let (t, u) = (
+            *self.patch.triangles.get(at[0])?,
+            *self.patch.triangles.get(at[1])?,
+        );
+        for r in 0..3 {
+            let (a, b, c) = (t[r], t[(r + 1) % 3], t[(r + 2) % 3]);
+            let Some(e) = (0..3).find(|&e| u[e] == b && u[(e + 1) % 3] == a) else {
+                continue;
+            };
+            let d = u[(e + 2) % 3];
+            if c == d || new[0] != [a, d, c] || new[1] != [b, c, d] {
+                return None;
+            }
+            let has_cd = self.patch.triangles.iter().any(|x| {
+                (0..3).any(|i| {
+                    let (p, q) = (x[i], x[(i + 1) % 3]);
+                    (p == c && q == d) || (p == d && q == c)
+                })
+            });
+            return (!has_cd).then_some((c, d));
+        }
+        None
+    }
+
+    /// The topology check of a patch made by [`Self::flipped_edge`]'s flip: the new
+    /// edge `c-d`, a chord when both are loop vertices, must not be an edge of the
+    /// mesh already.
+    fn flip_topology(&self, c: u32, d: u32) -> Result<(), CheckFailure> {
+        let (a, b) = (c.min(d), c.max(d));
+        let k = self.hole.len();
+        if (b as usize) < k {
+            let (va, vb) = (self.hole[a as usize], self.hole[b as usize]);
+            if self.mesh.topo.neighbors(va).contains(&vb) {
+                return Err(CheckFailure::Topology(format!(
+                    "chord {a}-{b} duplicates an existing mesh edge"
+                )));
+            }
+        }
+        Ok(())
+    }
+
     /// Keeps a change made by [`Self::trial`] on this state. A change whose topology
     /// failed (its triangles were not tested) is refused: `false`, nothing changed.
     pub fn apply(&mut self, change: Change) -> bool {
         if change.tris.len() != change.at.len() {
             return false;
         }
+        // the trial tested the triangles only when the topology passed
+        self.topology = Ok(());
         let at = change.at.clone();
         for (c, &i) in at.iter().enumerate() {
             self.patch.triangles[i] = change.new[c];
