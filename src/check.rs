@@ -3,11 +3,14 @@
 //! the mesh stays edge-manifold and consistently oriented), and no new triangle
 //! intersects another triangle of the mesh or of the patch.
 //!
-//! Self-intersection: the broad phase is a bounding-volume hierarchy ([`crate::bvh`])
-//! over the mesh's faces built once in [`Checker::new`], plus a logarithmic set of
-//! small trees over the faces committed since and a linear scan of a short tail of
-//! them (see [`Checker`]); the narrow phase is an exact
-//! triangle-triangle test on `robust::orient3d`/`orient2d` signs ([`tri_tri`]).
+//! Self-intersection: the broad phase is a scan of the mesh's face boxes (`f32`,
+//! compared in blocks) or, after many checks, a bounding-volume hierarchy
+//! ([`crate::bvh`]) over them, plus a logarithmic set of small trees over the faces
+//! committed since and a linear scan of a short tail of them (see [`Checker`]); the
+//! narrow phase is an exact triangle-triangle test on `robust::orient3d`/`orient2d`
+//! signs ([`tri_tri`]). Repairs that change a few triangles of a patch at a time
+//! (edge flips, re-triangulating a region) use [`PatchChecks`], which records every
+//! failure once and re-tests only what a change touches, with the same result.
 //!
 //! Readings where A5 is vague:
 //! - Triangles that share vertices follow CGAL's convention (as in
@@ -50,7 +53,7 @@ pub enum CheckFailure {
 }
 
 /// Holds what the checks need across holes. For the faces the mesh had at
-/// construction: their boxes (`f32`, rounded outwards), scanned linearly for the faces
+/// construction: their boxes (`f32`, see [`FaceBox`]), scanned linearly for the faces
 /// near a patch, and a bounding-volume hierarchy over them, built when many checks are
 /// expected or once the scans have cost about as much as building it
 /// ([`SCANS_BEFORE_TREE`]). For the faces committed since: a logarithmic set of smaller
@@ -62,7 +65,8 @@ pub enum CheckFailure {
 /// face it meets. So results never depend on thread timing or on when a tree was built.
 pub struct Checker {
     /// Boxes of the faces the mesh had at construction (computed on first use, or
-    /// by [`Checker::prepare`] on another thread while the first patches are made).
+    /// by [`Checker::prepare`] as the first job of the proposal phase, while the
+    /// other thread starts on the biggest hole).
     boxes: OnceLock<FaceBoxes>,
     /// Number of faces the mesh had at construction.
     base_faces: usize,
@@ -320,7 +324,8 @@ impl Checker {
     }
 
     /// The mesh faces whose boxes meet the box of the patch's triangles (what
-    /// [`Checker::check_patch`] tests the patch against), ascending. For checking many
+    /// [`Checker::check_patch`] tests the patch against; compared in `f32`, so a
+    /// few more, which meet no triangle of the patch), ascending. For checking many
     /// patches over the same vertices at the same places (edge flips of one patch) with
     /// [`Checker::check_patch_near`], without finding them again each time.
     pub fn faces_near(&self, mesh: &Mesh, hole: &[VertexId], patch: &Patch) -> Vec<u32> {
