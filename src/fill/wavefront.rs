@@ -322,6 +322,8 @@ pub struct Stats {
     pub clipped_fronts: usize,
     /// Stuck fronts closed by [`residual::close`].
     pub residual_fronts: usize,
+    /// Residual fronts whose faired piece crossed a triangle in place, kept unfaired.
+    pub unfaired_residuals: usize,
 }
 
 /// [`fill`], also returning what the run did.
@@ -1259,12 +1261,8 @@ impl Wave {
                 context: &context,
                 edge_length: self.len,
             };
-            let (new_pts, tris) = residual::close(&input, ctx.policy, &ctx.deadline)?;
+            let closed = residual::close_keeping_unfaired(&input, ctx.policy, &ctx.deadline)?;
             let base = self.pos.len() as u32;
-            for p in new_pts {
-                self.pos.push(p);
-                self.acc.push(DVec3::ZERO);
-            }
             let map = |i: u32| {
                 if (i as usize) < n {
                     verts[i as usize]
@@ -1272,6 +1270,23 @@ impl Wave {
                     base + i - n as u32
                 }
             };
+            let tris = closed.triangles;
+            let mut new_pts = closed.new_vertices;
+            // the fairing can push the piece through the front's own triangles (a
+            // residual inside a fold of the front): then the unfaired piece (on its
+            // minimum-area triangulation), when that one crosses nothing
+            if let Some(flat) = closed.unfaired {
+                if self.crosses_placed(&tris, map, &new_pts, base)
+                    && !self.crosses_placed(&tris, map, &flat, base)
+                {
+                    new_pts = flat;
+                    self.stats.unfaired_residuals += 1;
+                }
+            }
+            for p in new_pts {
+                self.pos.push(p);
+                self.acc.push(DVec3::ZERO);
+            }
             for t in tris {
                 self.add_triangle(t.map(map));
             }
@@ -1282,6 +1297,51 @@ impl Wave {
             self.stats.residual_fronts += 1;
         }
         Ok(())
+    }
+
+    /// Does a triangle of a residual piece (`tris` in ring numbering, mapped to patch
+    /// numbering by `map`; new vertex `base + i` at `new_pts[i]`) cross a triangle in
+    /// place (the front's and the mesh faces around the hole), away from their shared
+    /// corners? The test of [`Wave::valid`]'s non-projected case.
+    fn crosses_placed(
+        &mut self,
+        tris: &[[u32; 3]],
+        map: impl Fn(u32) -> u32,
+        new_pts: &[DVec3],
+        base: u32,
+    ) -> bool {
+        let at = |v: u32| {
+            if v < base {
+                self.pos[v as usize]
+            } else {
+                new_pts[(v - base) as usize]
+            }
+        };
+        let pieces: Vec<([u32; 3], [DVec3; 3], Box3)> = tris
+            .iter()
+            .map(|t| {
+                let ids = t.map(&map);
+                let p = ids.map(at);
+                (ids, p, Box3::of(&p))
+            })
+            .collect();
+        // one query for the whole piece, then each triangle's own box
+        let (lo, hi) = pieces.iter().fold(
+            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(lo, hi), (_, _, b)| (lo.min(b.lo), hi.max(b.hi)),
+        );
+        let mut near = std::mem::take(&mut self.scratch);
+        self.tri_grid.query_box(lo, hi, &mut near);
+        near.extend_from_slice(&self.big);
+        let hit = near.iter().any(|&id| {
+            let pl = &self.placed[id as usize];
+            let pb = Box3 { lo: pl.lo, hi: pl.hi };
+            pieces
+                .iter()
+                .any(|(ids, p, b)| b.meets(&pb) && cross3d(ids.map(Some), p, pl.ids, &pl.p))
+        });
+        self.scratch = near;
+        hit
     }
 
     /// One step at `node`; false when no variant is valid.

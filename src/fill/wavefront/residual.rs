@@ -38,6 +38,18 @@ pub struct Residual<'a> {
     pub edge_length: f64,
 }
 
+/// A closed ring: the new interior vertices and the triangles, in ring numbering
+/// (index `i < ring.len()` is ring vertex `i`, then the new vertices).
+pub struct Closed {
+    /// The new vertices, faired.
+    pub new_vertices: Vec<DVec3>,
+    /// The same vertices before the fairing (refined and relaxed on the minimum-area
+    /// triangulation), when the fairing moved them: the fallback of a caller whose
+    /// faired piece crosses what is around it.
+    pub unfaired: Option<Vec<DVec3>>,
+    pub triangles: Vec<[u32; 3]>,
+}
+
 /// Closes the ring: returns the new interior vertices and the triangles, in ring
 /// numbering (index `i < ring.len()` is ring vertex `i`, then the new vertices).
 pub fn close(
@@ -45,6 +57,15 @@ pub fn close(
     policy: &Policy,
     deadline: &Deadline,
 ) -> Result<(Vec<DVec3>, Vec<[u32; 3]>), FillError> {
+    close_keeping_unfaired(r, policy, deadline).map(|c| (c.new_vertices, c.triangles))
+}
+
+/// [`close`], also returning the new vertices as they were before the fairing.
+pub fn close_keeping_unfaired(
+    r: &Residual,
+    policy: &Policy,
+    deadline: &Deadline,
+) -> Result<Closed, FillError> {
     let n = r.ring.len();
     if n < 3 {
         return Err(FillError::Failed(format!(
@@ -80,7 +101,12 @@ pub fn close(
     if pos.len() > n {
         fair_interior(&mut pos, n, &tris, r.context)?;
     }
-    Ok((pos[n..].to_vec(), tris))
+    let unfaired = (pos[n..] != rf.pos[n..]).then(|| rf.pos[n..].to_vec());
+    Ok(Closed {
+        new_vertices: pos[n..].to_vec(),
+        unfaired,
+        triangles: tris,
+    })
 }
 
 /// Thin-plate fairing of `pos[n..]` over `tris` plus the context triangles (fixed).
