@@ -511,7 +511,7 @@ impl Checker {
             let mut hit: Option<(usize, usize)> = None;
             ptree.self_pairs(|a, b| {
                 let (i, j) = (a.min(b), a.max(b));
-                if hit.map_or(true, |h| (i, j) < h)
+                if hit.is_none_or(|h| (i, j) < h)
                     && boxes_meet(boxes[i].0, boxes[i].1, boxes[j].0, boxes[j].1)
                 {
                     let ((p, pk), (q, qk)) = (&tris[i], &tris[j]);
@@ -543,8 +543,7 @@ impl Checker {
                 (DVec3::splat(f64::NEG_INFINITY), DVec3::splat(f64::INFINITY))
             };
             ptree.query(qlo, qhi, |i| {
-                if hit.map_or(true, |(h, _)| i < h) && boxes_meet(boxes[i].0, boxes[i].1, qlo, qhi)
-                {
+                if hit.is_none_or(|(h, _)| i < h) && boxes_meet(boxes[i].0, boxes[i].1, qlo, qhi) {
                     let (p, pk) = &tris[i];
                     if tri_tri_axes(p, pk, axes[i], &q, &qk, qa) {
                         hit = Some((i, f));

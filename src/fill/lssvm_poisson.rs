@@ -915,7 +915,7 @@ impl Front {
             }
             let a = geom::angles(pts[i0], pts[j], pts[i2]);
             let score = a[0].min(a[1]).min(a[2]);
-            if best.map_or(true, |(bs, _)| score > bs) {
+            if best.is_none_or(|(bs, _)| score > bs) {
                 best = Some((score, j));
             }
         }
@@ -960,7 +960,7 @@ impl Front {
                     continue;
                 }
                 let dist = (self.pos[v as usize] - q).length();
-                if dist < self.merge && best.map_or(true, |(bd, _)| dist < bd) {
+                if dist < self.merge && best.is_none_or(|(bd, _)| dist < bd) {
                     best = Some((dist, v));
                 }
             }

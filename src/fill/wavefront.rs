@@ -82,8 +82,9 @@
 //!     end where the patch triangle across their longest edge allows. Failing again, or after
 //!     `max_steps_per_vertex · k` steps, every remaining front is closed as a residual loop
 //!     ([`residual`]: minimum-area triangulation in 3-D, refined to `Avglen`, thin-plate
-//!     faired against the triangles around it). Closes 1999 of 2000 random star-shaped
-//!     loops.
+//!     faired against the triangles around it; kept unfaired when the faired piece
+//!     crosses a triangle in place and the unfaired one does not, as in a fold of the
+//!     bunny scan's hole 2). Closes 1999 of 2000 random star-shaped loops.
 //!   - a front whose patch area passes `max_area_ratio` (2.0) times the loop's vector
 //!     area (a lower bound on the area of any surface the loop bounds) has run away: it
 //!     climbed into a dome over the hole or folded (measured on the bench: full fronts
@@ -1335,7 +1336,10 @@ impl Wave {
         near.extend_from_slice(&self.big);
         let hit = near.iter().any(|&id| {
             let pl = &self.placed[id as usize];
-            let pb = Box3 { lo: pl.lo, hi: pl.hi };
+            let pb = Box3 {
+                lo: pl.lo,
+                hi: pl.hi,
+            };
             pieces
                 .iter()
                 .any(|(ids, p, b)| b.meets(&pb) && cross3d(ids.map(Some), p, pl.ids, &pl.p))
@@ -1453,7 +1457,7 @@ impl Wave {
                 let n = unit_or((p[1] - p[0]).cross(p[2] - p[0]), DVec3::ZERO);
                 let ang = super::geom::angles(p[0], p[1], p[2]);
                 let key = (n.dot(nrm) > FACING_MIN, ang[0].min(ang[1]).min(ang[2]), i);
-                if best.map_or(true, |b| (key.0, key.1) > (b.0, b.1)) {
+                if best.is_none_or(|b| (key.0, key.1) > (b.0, b.1)) {
                     best = Some(key);
                 }
             }
@@ -1522,7 +1526,7 @@ impl Wave {
             }
             let dist = (self.pos[nd.vert as usize] - x).length();
             // ties go to the smallest id (the query's order is arbitrary)
-            if dist < r && best.map_or(true, |(b, bid)| dist < b || (dist == b && id < bid)) {
+            if dist < r && best.is_none_or(|(b, bid)| dist < b || (dist == b && id < bid)) {
                 best = Some((dist, id));
             }
         }
@@ -2604,6 +2608,47 @@ mod tests {
                 m.max
             );
         }
+    }
+
+    /// The bunny scan's hole 2 (42 boundary vertices, in a fold of the ear's base):
+    /// the thin-plate fairing of its residual front bulged the residual through the
+    /// front's own triangles, so its patch passed the checks only after a
+    /// re-triangulation repair. Now the residual is kept unfaired and the patch as made
+    /// passes the whole check (intersections with itself and the mesh included). The
+    /// bunny is bench data that must not be copied into the repository
+    /// (`../shared/bench-data/README.md`): the test reads it from there and says so and
+    /// passes when it is absent.
+    #[test]
+    fn bunny_hole_2_residual_is_kept_unfaired_and_passes_as_made() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../shared/bench-data/meshes/stanford-bunny.obj");
+        if !path.exists() {
+            eprintln!("skipped: {} is absent", path.display());
+            return;
+        }
+        let raw = crate::read(&path, None).unwrap();
+        let (mesh, _) = Mesh::from_raw(&raw);
+        mesh.validate().unwrap();
+        let loops = mesh.topo.boundary_loops();
+        assert_eq!(loops.len(), 5);
+        let policy = Policy::default();
+        let hole = Hole::new(2, &mesh, loops[2].clone(), &policy);
+        assert_eq!(hole.len(), 42);
+        let ctx = FillContext {
+            mesh: &mesh,
+            hole: &hole,
+            policy: &policy,
+            deadline: Deadline::none(),
+            checker: None,
+        };
+        let (patch, stats) = fill_with_stats(&ctx).unwrap();
+        assert_eq!(stats.residual_fronts, 1, "{stats:?}");
+        assert_eq!(stats.unfaired_residuals, 1, "{stats:?}");
+        let checker = crate::check::Checker::new(&mesh);
+        checker
+            .check_patch(&mesh, &hole.vertices, &patch, &policy.checks)
+            .unwrap();
+        accept(&mesh, &hole, &patch, &policy);
     }
 
     /// Bad options and loops give a clean error.

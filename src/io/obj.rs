@@ -388,7 +388,7 @@ impl Piece {
                 if i >= MAX_ELEMENTS {
                     return None;
                 }
-                if self.max_index.map_or(true, |(m, _)| i > m) {
+                if self.max_index.is_none_or(|(m, _)| i > m) {
                     self.max_index = Some((i, self.lines));
                 }
                 Corner::Abs(i as u32)
@@ -541,7 +541,7 @@ impl State {
         }
         // The line reader's forward reference: the first line with the largest index.
         if let Some((i, l)) = p.max_index {
-            if self.forward.map_or(true, |(m, _)| i > m) && i >= nv as u64 {
+            if self.forward.is_none_or(|(m, _)| i > m) && i >= nv as u64 {
                 self.forward = Some((i, line + l));
             }
         }
@@ -663,7 +663,7 @@ fn read_lines<R: BufRead>(
                     if i as u64 >= MAX_ELEMENTS {
                         return Err(bad(format!("vertex index {k} out of range")));
                     }
-                    if i >= nv && forward.map_or(true, |(m, _)| (i as u64) > m) {
+                    if i >= nv && forward.is_none_or(|(m, _)| (i as u64) > m) {
                         *forward = Some((i as u64, ln));
                     }
                     let i = i as u32;

@@ -650,7 +650,7 @@ impl<'a> Builder<'a> {
                 continue;
             }
             let d = (self.pos[cn.v as usize] - q).length();
-            if d <= r && best.map_or(true, |(bd, bc)| d < bd || (d == bd && c < bc)) {
+            if d <= r && best.is_none_or(|(bd, bc)| d < bd || (d == bd && c < bc)) {
                 best = Some((d, c));
             }
         }
@@ -1096,7 +1096,7 @@ impl<'a> Builder<'a> {
                     }
                     let q = geom::quality(g[0][0], g[0][1], g[0][2])
                         .min(geom::quality(g[1][0], g[1][1], g[1][2]));
-                    if best.map_or(true, |(bq, _)| q > bq) {
+                    if best.is_none_or(|(bq, _)| q > bq) {
                         best = Some((q, pair));
                     }
                 }

@@ -233,7 +233,7 @@ pub fn segmentation(bp: &[DVec3], normals: &[DVec3]) -> Option<Segmentation> {
             let l2 = sym3_eigenvalues(&arc(i, len2).covariance())[0];
             let l1 = sym3_eigenvalues(&arc(j, len1).covariance())[0];
             let v = l1.max(l2);
-            if best.map_or(true, |b| v < b.0) {
+            if best.is_none_or(|b| v < b.0) {
                 best = Some((v, i, j));
             }
         }
@@ -310,7 +310,7 @@ pub fn best_pairing(bp: &[DVec3]) -> usize {
             .iter()
             .map(|&(a, b)| (bp[a] - bp[b]).length())
             .sum();
-        if best.map_or(true, |b| d < b.0) {
+        if best.is_none_or(|b| d < b.0) {
             best = Some((d, s));
         }
     }
@@ -482,7 +482,7 @@ fn ring_point(mesh: &Mesh, v: VertexId, p: DVec3, n: DVec3, toward: DVec3) -> Op
                 continue;
             };
             let score = dir.dot(toward);
-            if best.map_or(true, |b| score < b.0) {
+            if best.is_none_or(|b| score < b.0) {
                 best = Some((score, x));
             }
         }

@@ -244,7 +244,7 @@ pub fn exact(inp: &LoopInput, idx: &[u32]) -> Result<Vec<[u32; 3]>, FillError> {
                     }
                     w.dih = w.dih.max(worst);
                 }
-                if cur.as_ref().map_or(true, |c| w.better_than(&c.0)) {
+                if cur.as_ref().is_none_or(|c| w.better_than(&c.0)) {
                     cur = Some((w, m as u32, nt));
                 }
             }
@@ -449,7 +449,7 @@ fn restricted(inp: &LoopInput) -> Result<Option<Vec<[u32; 3]>>, FillError> {
                 }
                 w.dih = w.dih.max(worst);
             }
-            if cur.as_ref().map_or(true, |c| w.better_than(&c.0)) {
+            if cur.as_ref().is_none_or(|c| w.better_than(&c.0)) {
                 cur = Some((w, m));
             }
         }
@@ -513,7 +513,7 @@ fn divide(inp: &LoopInput, all: Vec<u32>) -> Result<Vec<[u32; 3]>, FillError> {
                     continue;
                 }
                 let d = (inp.pts[idx[a] as usize] - inp.pts[idx[b] as usize]).length() / shorter;
-                if best.map_or(true, |c| d < c.0) {
+                if best.is_none_or(|c| d < c.0) {
                     best = Some((d, a, b));
                 }
             }

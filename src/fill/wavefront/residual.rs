@@ -10,7 +10,9 @@
 //! ([`crate::fill::min_area_fair`]'s triangulation and refiner), then the new interior
 //! vertices are faired (thin plate, with the patch and mesh triangles around the front
 //! fixed as constraints) so the residual piece continues the surface instead of spanning
-//! it flat. The caller's patch checks judge the result.
+//! it flat. The caller's patch checks judge the result; [`close_keeping_unfaired`] also
+//! returns the piece before the fairing, which the wavefront keeps when the faired one
+//! crosses its own triangles (the fairing bulges a residual that sits in a fold).
 
 use super::super::min_area_fair::{refine::Refiner, triangulate};
 use super::super::{fair, Deadline, FillError};

@@ -362,7 +362,7 @@ fn repair_by_retriangulation(
                 }
             }
         }
-        let pts: Vec<glam::DVec3> = ring.iter().map(|&v| pos_of(&patch, v)).collect();
+        let pts: Vec<glam::DVec3> = ring.iter().map(|&v| pos_of(patch, v)).collect();
         let outside_normals = vec![None; n];
         let input = triangulate::LoopInput {
             pts: &pts,
