@@ -269,29 +269,35 @@ impl Checker {
                 .zip(ly.iter_mut())
                 .zip(lz.iter_mut())
                 .zip(hx.iter_mut().zip(hy.iter_mut()).zip(hz.iter_mut()));
+            let np = pos.len();
             for (f, (((lx, ly), lz), ((hx, hy), hz))) in faces.iter().zip(slots) {
-                let fb = match (
-                    pos.get(f[0].idx()),
-                    pos.get(f[1].idx()),
-                    pos.get(f[2].idx()),
-                ) {
-                    (Some(&a), Some(&b), Some(&c)) => {
-                        // plain comparisons (f64::min also handles NaN); a NaN, an
-                        // infinity or a coordinate beyond the f32 range gives a
-                        // non-finite bound, and the box of everything
-                        let lo = |x: f64, y: f64| if y < x { y } else { x };
-                        let hi = |x: f64, y: f64| if y > x { y } else { x };
-                        let fb = FaceBox {
-                            lo: [0, 1, 2].map(|i| lo(lo(a[i], b[i]), c[i]) as f32),
-                            hi: [0, 1, 2].map(|i| hi(hi(a[i], b[i]), c[i]) as f32),
-                        };
-                        if fb.lo.iter().chain(&fb.hi).all(|x| x.is_finite()) {
-                            fb
-                        } else {
-                            FaceBox::EVERYTHING
-                        }
+                let (i, j, k) = (f[0].idx(), f[1].idx(), f[2].idx());
+                let fb = if i.max(j).max(k) < np {
+                    let (a, b, c) = (pos[i], pos[j], pos[k]);
+                    // plain comparisons (f64::min also handles NaN); a NaN, an
+                    // infinity or a coordinate beyond the f32 range gives a
+                    // non-finite bound (or a sum of bounds past the f32 range, when
+                    // the box of everything is only a wider box than needed), and
+                    // the box of everything
+                    let lo = |x: f64, y: f64| if y < x { y } else { x };
+                    let hi = |x: f64, y: f64| if y > x { y } else { x };
+                    let l = [
+                        lo(lo(a.x, b.x), c.x) as f32,
+                        lo(lo(a.y, b.y), c.y) as f32,
+                        lo(lo(a.z, b.z), c.z) as f32,
+                    ];
+                    let h = [
+                        hi(hi(a.x, b.x), c.x) as f32,
+                        hi(hi(a.y, b.y), c.y) as f32,
+                        hi(hi(a.z, b.z), c.z) as f32,
+                    ];
+                    if (l[0] - h[0] + l[1] - h[1] + l[2] - h[2]).is_finite() {
+                        FaceBox { lo: l, hi: h }
+                    } else {
+                        FaceBox::EVERYTHING
                     }
-                    _ => FaceBox::EVERYTHING,
+                } else {
+                    FaceBox::EVERYTHING
                 };
                 (*lx, *ly, *lz) = (fb.lo[0], fb.lo[1], fb.lo[2]);
                 (*hx, *hy, *hz) = (fb.hi[0], fb.hi[1], fb.hi[2]);
