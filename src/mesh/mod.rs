@@ -17,7 +17,6 @@ mod ids;
 pub use build::BuildReport;
 pub use ids::{FaceId, HalfedgeId, VertexId};
 
-use crate::fasthash::HashMap;
 use glam::DVec3;
 
 /// Connectivity only: faces, twins and one outgoing half-edge per vertex.
@@ -186,60 +185,123 @@ impl Topology {
     ///
     /// Fails, changing nothing, when a new directed edge already exists (the result
     /// would not be an oriented manifold).
+    ///
+    /// No hashing: the directed edges that matter (the new ones, and the existing ones
+    /// leaving or entering a vertex of the new faces) are grouped by their start
+    /// vertex with a counting sort over the new faces' vertices (sorted, found by
+    /// binary search), and each vertex's short list is searched for an end vertex
+    /// (a patch of 1,800 faces: 0.5 ms with two hash maps, serial in the fill).
     pub fn add_faces(&mut self, new: &[[VertexId; 3]], num_vertices: usize) -> Result<(), String> {
         if self.anchor.len() < num_vertices {
             self.anchor.resize(num_vertices, None);
         }
-        let mut open: HashMap<(VertexId, VertexId), HalfedgeId> =
-            HashMap::with_capacity_and_hasher(new.len() * 3, Default::default());
         let mut touched: Vec<VertexId> = Vec::with_capacity(new.len() * 3);
         for f in new {
-            for &v in f {
-                touched.push(v);
-            }
+            touched.extend_from_slice(f);
         }
         touched.sort_unstable();
         touched.dedup();
-        // existing directed edges around the touched vertices
-        let mut existing: HashMap<(VertexId, VertexId), HalfedgeId> =
-            HashMap::with_capacity_and_hasher(touched.len() * 4, Default::default());
-        for &v in &touched {
+        if let Some(&v) = touched.last() {
             if v.idx() >= self.anchor.len() {
                 return Err(format!("vertex {v} out of range"));
             }
-            for h in self.outgoing(v) {
-                existing.insert((v, self.to(h)), h);
-                let p = h.prev();
-                existing.insert((self.from(p), v), p);
+        }
+        // the new vertices of a patch are one run of ids at the end of `touched`: an
+        // offset there, a binary search among the others (the loop's)
+        let t = touched.len();
+        let mut run = t.saturating_sub(1);
+        while run > 0 && touched[run - 1].0 + 1 == touched[run].0 {
+            run -= 1;
+        }
+        let run_first = touched.get(run).map_or(u32::MAX, |v| v.0);
+        let local = |v: VertexId| -> Option<usize> {
+            if v.0 >= run_first {
+                let i = run + (v.0 - run_first) as usize;
+                (i < t).then_some(i)
+            } else {
+                touched[..run].binary_search(&v).ok()
+            }
+        };
+        // every vertex of a new face is touched
+        let corners: Vec<[usize; 3]> = new
+            .iter()
+            .map(|f| f.map(|v| local(v).unwrap_or(0)))
+            .collect();
+        let base = self.faces.len() as u32;
+        let new_half = |fi: usize, c: usize| HalfedgeId((base + fi as u32) * 3 + c as u32);
+        // the directed edges by start vertex: (end, half-edge); new half-edges are
+        // those from `base * 3` on
+        let mut edges: Vec<(usize, VertexId, HalfedgeId)> = Vec::with_capacity(new.len() * 6);
+        for (fi, f) in new.iter().enumerate() {
+            for c in 0..3 {
+                edges.push((corners[fi][c], f[(c + 1) % 3], new_half(fi, c)));
             }
         }
-        let base = self.faces.len() as u32;
+        for (a, &v) in touched.iter().enumerate() {
+            for h in self.outgoing(v) {
+                edges.push((a, self.to(h), h));
+                // the one entering `v`, kept under its start when that is touched
+                // (a complete fan lists it there too; the copy is harmless)
+                let p = h.prev();
+                if let Some(u) = local(self.from(p)) {
+                    edges.push((u, v, p));
+                }
+            }
+        }
+        let mut start = vec![0usize; t + 1];
+        for e in &edges {
+            start[e.0 + 1] += 1;
+        }
+        for i in 0..t {
+            start[i + 1] += start[i];
+        }
+        let mut fill = start.clone();
+        let mut by_start: Vec<(VertexId, HalfedgeId)> =
+            vec![(VertexId(0), HalfedgeId(0)); edges.len()];
+        for &(a, b, h) in &edges {
+            by_start[fill[a]] = (b, h);
+            fill[a] += 1;
+        }
+        let first_new = base * 3;
+        let out_of = |a: usize| &by_start[start[a]..start[a + 1]];
+        // in face order, as the first failure is reported: a repeated vertex, or a
+        // directed edge that exists already or comes in an earlier new face
         for (fi, f) in new.iter().enumerate() {
             if f[0] == f[1] || f[1] == f[2] || f[0] == f[2] {
                 return Err(format!("new face {fi} repeats a vertex"));
             }
             for c in 0..3 {
-                let key = (f[c], f[(c + 1) % 3]);
-                if existing.contains_key(&key) || open.contains_key(&key) {
-                    return Err(format!(
-                        "directed edge {}->{} would be used twice",
-                        key.0, key.1
-                    ));
+                let (a, b) = (f[c], f[(c + 1) % 3]);
+                let h = new_half(fi, c);
+                if out_of(corners[fi][c])
+                    .iter()
+                    .any(|&(e, g)| e == b && (g.0 < first_new || g.0 < h.0))
+                {
+                    return Err(format!("directed edge {a}->{b} would be used twice"));
                 }
-                open.insert(key, HalfedgeId((base + fi as u32) * 3 + c as u32));
             }
         }
-        let mut links: Vec<(HalfedgeId, HalfedgeId)> = Vec::with_capacity(open.len() / 2 + 1);
-        for (&(a, b), &h) in &open {
-            if let Some(&t) = open.get(&(b, a)) {
-                if h.0 < t.0 {
+        let mut links: Vec<(HalfedgeId, HalfedgeId)> = Vec::with_capacity(new.len() * 2);
+        for (fi, f) in new.iter().enumerate() {
+            for c in 0..3 {
+                let (a, b) = (f[c], f[(c + 1) % 3]);
+                let h = new_half(fi, c);
+                let Some(&(_, t)) = out_of(corners[fi][(c + 1) % 3])
+                    .iter()
+                    .find(|&&(e, _)| e == a)
+                else {
+                    continue;
+                };
+                if t.0 >= first_new {
+                    if h.0 < t.0 {
+                        links.push((h, t));
+                    }
+                } else {
+                    if self.twin(t).is_some() {
+                        return Err(format!("edge {a}-{b} would get a third face"));
+                    }
                     links.push((h, t));
                 }
-            } else if let Some(&t) = existing.get(&(b, a)) {
-                if self.twin(t).is_some() {
-                    return Err(format!("edge {a}-{b} would get a third face"));
-                }
-                links.push((h, t));
             }
         }
         self.faces.extend_from_slice(new);
@@ -251,7 +313,7 @@ impl Topology {
         for (fi, f) in new.iter().enumerate() {
             for (c, &v) in f.iter().enumerate() {
                 if self.anchor[v.idx()].is_none() {
-                    self.anchor[v.idx()] = Some(HalfedgeId((base + fi as u32) * 3 + c as u32));
+                    self.anchor[v.idx()] = Some(new_half(fi, c));
                 }
             }
         }
@@ -618,5 +680,101 @@ mod tests {
         assert!(m.add_faces(&[[hole[0], hole[1], hole[2]]]).is_err());
         assert_eq!(m.num_faces(), before);
         m.validate().unwrap();
+    }
+
+    /// The grid of [`grid`]`(4)` with the cells (1,1) and (2,1) removed: a hole of 6.
+    fn grid_with_hole() -> (Mesh, Vec<VertexId>) {
+        let mut raw = grid(4);
+        let cell = |i: usize, j: usize| j * 4 + i;
+        for c in [cell(2, 1), cell(1, 1)] {
+            raw.faces.remove(2 * c + 1);
+            raw.faces.remove(2 * c);
+        }
+        let (m, _) = Mesh::from_raw(&raw);
+        m.validate().unwrap();
+        let hole = m
+            .topo
+            .boundary_loops()
+            .into_iter()
+            .find(|l| l.len() == 6)
+            .unwrap();
+        (m, hole)
+    }
+
+    /// A fan around a new centre vertex closes the hole; every twin is linked (the
+    /// new spokes with each other, the rim with the mesh) and the ids of the input are
+    /// untouched.
+    #[test]
+    fn a_fan_over_new_vertex_links_every_twin() {
+        let (mut m, hole) = grid_with_hole();
+        let nv = m.num_vertices();
+        let c = m.add_vertex(DVec3::new(2.0, 1.5, 0.0), None);
+        let k = hole.len();
+        let fan: Vec<[VertexId; 3]> = (0..k).map(|i| [hole[i], hole[(i + 1) % k], c]).collect();
+        let before: Vec<[VertexId; 3]> = m.topo.faces().to_vec();
+        m.add_faces(&fan).unwrap();
+        m.validate().unwrap();
+        assert_eq!(m.num_vertices(), nv + 1);
+        assert_eq!(&m.topo.faces()[..before.len()], &before[..]);
+        assert_eq!(m.topo.boundary_loops().len(), 1);
+        // every half-edge of the fan has a twin
+        let base = before.len();
+        for f in base..m.num_faces() {
+            for corner in 0..3 {
+                let h = HalfedgeId((f * 3 + corner) as u32);
+                assert!(m.topo.twin(h).is_some(), "face {f} corner {corner}");
+            }
+        }
+    }
+
+    /// Each way a batch can break the mesh is an error that changes nothing: a vertex
+    /// repeated in a face, a directed edge the mesh has, one used twice in the batch,
+    /// an edge that would get a third face, a vertex out of range.
+    #[test]
+    fn bad_batches_are_errors_and_change_nothing() {
+        let (mut m, hole) = grid_with_hole();
+        let k = hole.len();
+        let c = m.add_vertex(DVec3::new(2.0, 1.5, 0.0), None);
+        let rim = |i: usize| [hole[i], hole[(i + 1) % k], c];
+        // the reverse of a rim edge: a directed edge the mesh already has
+        let reversed = [hole[1], hole[0], c];
+        let cases: Vec<(Vec<[VertexId; 3]>, &str)> = vec![
+            (vec![rim(0), [hole[1], hole[1], c]], "repeats a vertex"),
+            (vec![rim(0), reversed], "used twice"),
+            (vec![rim(0), rim(1), rim(0)], "used twice"),
+            (vec![[hole[0], hole[1], VertexId(9999)]], "out of range"),
+        ];
+        for (batch, what) in cases {
+            let mut t = m.clone();
+            let e = t.add_faces(&batch).unwrap_err();
+            assert!(e.contains(what), "{e}: expected {what}");
+            assert_eq!(t.topo.faces(), m.topo.faces());
+            assert_eq!(t.topo.boundary_loops(), m.topo.boundary_loops());
+            t.validate().unwrap();
+        }
+        // a face on an interior edge (a face on each side already), either way round
+        let mut inner = None;
+        'find: for f in m.topo.faces() {
+            for c2 in 0..3 {
+                let (u, v) = (f[c2], f[(c2 + 1) % 3]);
+                let both = m
+                    .topo
+                    .outgoing(u)
+                    .any(|h| m.topo.to(h) == v && m.topo.twin(h).is_some());
+                if both {
+                    inner = Some((u, v));
+                    break 'find;
+                }
+            }
+        }
+        let (u, v) = inner.unwrap();
+        let mut t = m.clone();
+        let w = t.add_vertex(DVec3::new(9.0, 9.0, 1.0), None);
+        for face in [[v, u, w], [u, v, w]] {
+            let e = t.add_faces(&[face]).unwrap_err();
+            assert!(e.contains("used twice"), "{e}");
+            assert_eq!(t.topo.faces(), m.topo.faces());
+        }
+        t.validate().unwrap();
     }
 }
