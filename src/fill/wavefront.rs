@@ -1235,7 +1235,8 @@ impl Wave {
             let on_ring: HashSet<u32> = verts.iter().copied().collect();
             let mut outside = vec![None; n];
             let mut context = Vec::new();
-            for t in &self.placed {
+            let mut around: Vec<u32> = Vec::new();
+            for (id, t) in self.placed.iter().enumerate() {
                 if !t
                     .ids
                     .iter()
@@ -1244,6 +1245,7 @@ impl Wave {
                     continue;
                 }
                 context.push(t.p);
+                around.push(id as u32);
                 for c in 0..3 {
                     if let (Some(a), Some(b)) = (t.ids[c], t.ids[(c + 1) % 3]) {
                         // the triangle outside ring edge i -> i+1 holds the half-edge i+1 -> i
@@ -1277,8 +1279,8 @@ impl Wave {
             // residual inside a fold of the front): then the unfaired piece (on its
             // minimum-area triangulation), when that one crosses nothing
             if let Some(flat) = closed.unfaired {
-                if self.crosses_placed(&tris, map, &new_pts, base)
-                    && !self.crosses_placed(&tris, map, &flat, base)
+                if self.crosses_around(&around, &tris, map, &new_pts, base)
+                    && !self.crosses_around(&around, &tris, map, &flat, base)
                 {
                     new_pts = flat;
                     self.stats.unfaired_residuals += 1;
@@ -1301,11 +1303,14 @@ impl Wave {
     }
 
     /// Does a triangle of a residual piece (`tris` in ring numbering, mapped to patch
-    /// numbering by `map`; new vertex `base + i` at `new_pts[i]`) cross a triangle in
-    /// place (the front's and the mesh faces around the hole), away from their shared
-    /// corners? The test of [`Wave::valid`]'s non-projected case.
-    fn crosses_placed(
-        &mut self,
+    /// numbering by `map`; new vertex `base + i` at `new_pts[i]`) cross one of the
+    /// triangles in place `around` it (those with a corner on its ring: the front's and
+    /// the mesh faces there, which a bulging piece meets first), away from their shared
+    /// corners? The test of [`Wave::valid`]'s non-projected case. A choice between two
+    /// pieces only: the patch checks test the patch against everything.
+    fn crosses_around(
+        &self,
+        around: &[u32],
         tris: &[[u32; 3]],
         map: impl Fn(u32) -> u32,
         new_pts: &[DVec3],
@@ -1326,15 +1331,7 @@ impl Wave {
                 (ids, p, Box3::of(&p))
             })
             .collect();
-        // one query for the whole piece, then each triangle's own box
-        let (lo, hi) = pieces.iter().fold(
-            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-            |(lo, hi), (_, _, b)| (lo.min(b.lo), hi.max(b.hi)),
-        );
-        let mut near = std::mem::take(&mut self.scratch);
-        self.tri_grid.query_box(lo, hi, &mut near);
-        near.extend_from_slice(&self.big);
-        let hit = near.iter().any(|&id| {
+        around.iter().any(|&id| {
             let pl = &self.placed[id as usize];
             let pb = Box3 {
                 lo: pl.lo,
@@ -1343,9 +1340,7 @@ impl Wave {
             pieces
                 .iter()
                 .any(|(ids, p, b)| b.meets(&pb) && cross3d(ids.map(Some), p, pl.ids, &pl.p))
-        });
-        self.scratch = near;
-        hit
+        })
     }
 
     /// One step at `node`; false when no variant is valid.
