@@ -83,7 +83,7 @@
 //!     `max_steps_per_vertex · k` steps, every remaining front is closed as a residual loop
 //!     ([`residual`]: minimum-area triangulation in 3-D, refined to `Avglen`, thin-plate
 //!     faired against the triangles around it; kept unfaired when the faired piece
-//!     crosses a triangle in place and the unfaired one does not, as in a fold of the
+//!     crosses a triangle around the front and the unfaired one does not, as in a fold of the
 //!     bunny scan's hole 2). Closes 1999 of 2000 random star-shaped loops.
 //!   - a front whose patch area passes `max_area_ratio` (2.0) times the loop's vector
 //!     area (a lower bound on the area of any surface the loop bounds) has run away: it
@@ -323,7 +323,7 @@ pub struct Stats {
     pub clipped_fronts: usize,
     /// Stuck fronts closed by [`residual::close`].
     pub residual_fronts: usize,
-    /// Residual fronts whose faired piece crossed a triangle in place, kept unfaired.
+    /// Residual fronts whose faired piece crossed a triangle around the front, kept unfaired.
     pub unfaired_residuals: usize,
 }
 

@@ -12,7 +12,7 @@
 //! fixed as constraints) so the residual piece continues the surface instead of spanning
 //! it flat. The caller's patch checks judge the result; [`close_keeping_unfaired`] also
 //! returns the piece before the fairing, which the wavefront keeps when the faired one
-//! crosses its own triangles (the fairing bulges a residual that sits in a fold).
+//! crosses the triangles around the front (the fairing bulges a residual that sits in a fold).
 
 use super::super::min_area_fair::{refine::Refiner, triangulate};
 use super::super::{fair, Deadline, FillError};
