@@ -1277,7 +1277,8 @@ impl Wave {
             let mut new_pts = closed.new_vertices;
             // the fairing can push the piece through the front's own triangles (a
             // residual inside a fold of the front): then the unfaired piece (on its
-            // minimum-area triangulation), when that one crosses nothing
+            // minimum-area triangulation), when that one crosses none of those around
+            // the ring
             if let Some(flat) = closed.unfaired {
                 if self.crosses_around(&around, &tris, map, &new_pts, base)
                     && !self.crosses_around(&around, &tris, map, &flat, base)
