@@ -258,18 +258,15 @@ fn attempt(
         Err(FillError::Failed(why)) => return Err(failed(Outcome::Error, why)),
     };
     // even out the triangles tangentially; keep that only if it passes the checks
-    let mut relaxed = patch.clone();
-    relax::tangential_relax(
+    if let Some((relaxed, q)) = relax::relax_checked(
         mesh,
         hole,
-        &mut relaxed,
+        &patch,
         policy.fair.tangential_relax,
         relax::RELAX_STEP,
-    );
-    if relaxed != patch {
-        if let Ok(q) = checker.check_patch(mesh, &hole.vertices, &relaxed, &policy.checks) {
-            return Ok((relaxed, q, ms_since(ta)));
-        }
+        |p| checker.check_patch(mesh, &hole.vertices, p, &policy.checks),
+    ) {
+        return Ok((relaxed, q, ms_since(ta)));
     }
     match checker.check_patch(mesh, &hole.vertices, &patch, &policy.checks) {
         Ok(q) => Ok((patch, q, ms_since(ta))),

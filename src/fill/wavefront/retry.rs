@@ -15,7 +15,7 @@
 use super::super::{FillContext, FillError, Patch};
 use crate::check::{CheckFailure, Checker, PatchChecks};
 use crate::fasthash::{HashMap, HashSet};
-use crate::fill::relax::{tangential_relax, RELAX_STEP};
+use crate::fill::relax::{culprits, relax_checked, RELAX_STEP};
 use crate::policy::Policy;
 use crate::report::PatchQuality;
 
@@ -74,23 +74,19 @@ pub fn first_passing_at(
                 let check =
                     |q: &Patch| c.check_patch(ctx.mesh, &ctx.hole.vertices, q, &ctx.policy.checks);
                 let relax = |p: &Patch| {
-                    let mut relaxed = p.clone();
-                    tangential_relax(
+                    relax_checked(
                         ctx.mesh,
                         ctx.hole,
-                        &mut relaxed,
+                        p,
                         ctx.policy.fair.tangential_relax,
                         RELAX_STEP,
-                    );
-                    relaxed
+                        check,
+                    )
                 };
-                // relaxed if that passes, else as it is
-                let relaxed = relax(&p);
-                if relaxed != p {
-                    if let Ok(q) = check(&relaxed) {
-                        trace_settled(ctx, name, t, true);
-                        return Ok((relaxed, Some(q)));
-                    }
+                // relaxed if that passes (parts held where it fails), else as it is
+                if let Some((relaxed, q)) = relax(&p) {
+                    trace_settled(ctx, name, t, true);
+                    return Ok((relaxed, Some(q)));
                 }
                 // as made, with every failure recorded: the repairs below re-test
                 // only the triangles they change
@@ -119,11 +115,8 @@ pub fn first_passing_at(
                 });
                 if let Some((r, known)) = repaired {
                     // the repair passed the checks: relaxed if that passes too
-                    let relaxed = relax(&r);
-                    if relaxed != r {
-                        if let Ok(q) = check(&relaxed) {
-                            return Ok((relaxed, Some(q)));
-                        }
+                    if let Some((relaxed, q)) = relax(&r) {
+                        return Ok((relaxed, Some(q)));
                     }
                     return Ok((r, Some(known)));
                 }
@@ -155,25 +148,6 @@ fn trace_settled(ctx: &FillContext, name: &str, t: std::time::Instant, passed: b
 
 /// Rounds of [`repair_by_flips`].
 const REPAIR_ROUNDS: usize = 24;
-
-/// Patch triangles named by a failure: the failing one and, for a patch-patch
-/// intersection, the other.
-fn culprits(e: &CheckFailure) -> Vec<usize> {
-    match e {
-        CheckFailure::SelfIntersection(i, other) => {
-            let mut v = vec![*i];
-            if let Some(j) = other
-                .strip_prefix("patch triangle ")
-                .and_then(|r| r.trim().parse::<usize>().ok())
-            {
-                v.push(j);
-            }
-            v
-        }
-        CheckFailure::Degenerate(i, _) => vec![*i],
-        CheckFailure::Topology(_) => Vec::new(),
-    }
-}
 
 /// Local repair of a patch that fails the checks at a few triangles (a triangle
 /// spanning a fold of the loop, a sliver): flips an interior edge of a named triangle,
@@ -438,6 +412,7 @@ fn repair_by_retriangulation(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fill::relax::tangential_relax;
     use crate::fill::{Deadline, Hole};
     use crate::mesh::Mesh;
     use glam::DVec3;
