@@ -199,7 +199,9 @@ pub fn relax_checked<Q>(
         // and their new neighbours
         let corners = held.clone();
         for t in &patch.triangles {
-            if t.iter().any(|&v| (v as usize) >= k && corners.contains(&(v as usize - k))) {
+            if t.iter()
+                .any(|&v| (v as usize) >= k && corners.contains(&(v as usize - k)))
+            {
                 held.extend(t.iter().filter_map(|&v| (v as usize).checked_sub(k)));
             }
         }
@@ -364,7 +366,11 @@ mod tests {
         let check = |p: &Patch| {
             calls += 1;
             if p.new_vertices[4] != start[4] {
-                let t = p.triangles.iter().position(|t| t.contains(&(k + 4))).unwrap();
+                let t = p
+                    .triangles
+                    .iter()
+                    .position(|t| t.contains(&(k + 4)))
+                    .unwrap();
                 return Err(CheckFailure::SelfIntersection(t, "mesh face 0".into()));
             }
             Ok(())
@@ -397,12 +403,14 @@ mod tests {
     fn a_relaxation_that_always_fails_or_fails_its_topology_keeps_the_patch() {
         let (mesh, hole, patch, _) = grid_hole();
         let always = |_: &Patch| -> Result<(), CheckFailure> {
-            Err(CheckFailure::SelfIntersection(0, "patch triangle 17".into()))
+            Err(CheckFailure::SelfIntersection(
+                0,
+                "patch triangle 17".into(),
+            ))
         };
         assert!(relax_checked(&mesh, &hole, &patch, 30, RELAX_STEP, always).is_none());
-        let topo = |_: &Patch| -> Result<(), CheckFailure> {
-            Err(CheckFailure::Topology("test".into()))
-        };
+        let topo =
+            |_: &Patch| -> Result<(), CheckFailure> { Err(CheckFailure::Topology("test".into())) };
         assert!(relax_checked(&mesh, &hole, &patch, 30, RELAX_STEP, topo).is_none());
         let fine = |_: &Patch| -> Result<(), CheckFailure> { Ok(()) };
         assert!(relax_checked(&mesh, &hole, &patch, 0, RELAX_STEP, fine).is_none());

@@ -2656,7 +2656,10 @@ mod tests {
         let iterations = policy.fair.tangential_relax;
         crate::fill::relax::tangential_relax(&mesh, &hole, &mut whole, iterations, RELAX_STEP);
         assert!(
-            matches!(check(&whole), Err(crate::check::CheckFailure::SelfIntersection(..))),
+            matches!(
+                check(&whole),
+                Err(crate::check::CheckFailure::SelfIntersection(..))
+            ),
             "{:?}",
             check(&whole)
         );
