@@ -31,9 +31,10 @@ pub fn first_passing(
 }
 
 /// [`first_passing`] for variants that are not only policies: `run` also gets the
-/// variant's index. Each patch is relaxed tangentially
-/// ([`crate::fill::relax::tangential_relax`], as the dispatcher does) before it is
-/// checked, the unrelaxed one kept when only it passes; the quality returned with the
+/// variant's index. Each patch is relaxed tangentially and checked
+/// ([`crate::fill::relax::relax_checked`], as the dispatcher does: the vertices where
+/// the relaxed patch fails are held in place and it is relaxed again), the unrelaxed
+/// one kept when only it passes; the quality returned with the
 /// patch is that of the checks it passed (`None` when there is a single variant: the
 /// patch is returned as made, unchecked), so the dispatcher need not check it again.
 pub fn first_passing_at(
