@@ -1,10 +1,45 @@
-//! Hash maps and sets for the geometry code, with foldhash's fast hasher instead of
-//! std's SipHash: the keys there are small integers (edge pairs, vertex ids, grid
-//! cells) and SipHash was a tenth of the instructions of a fill (callgrind on the
-//! bench meshes). The seed is still random per process (no fixed seed an input could
-//! be crafted against); no result depends on iteration order.
+//! Hash maps and sets for the geometry code, whose keys are small integers (edge pairs,
+//! vertex ids, grid cells), where std's SipHash was a tenth of the instructions of a
+//! fill (callgrind on the bench meshes).
+//!
+//! [`HashMap`] and [`HashSet`] use foldhash's fast hasher, with a seed random per
+//! process (no fixed seed an input could be crafted against); no result depends on
+//! their iteration order. [`FxMap`] and [`FxSet`] use FxHash's multiply-rotate with no
+//! seed at all, for the hottest maps of the advancing front and the refinement, whose
+//! keys are the method's own indices (never read from a file).
 
 /// `std::collections::HashMap` with foldhash's fast hasher.
 pub type HashMap<K, V> = std::collections::HashMap<K, V, foldhash::fast::RandomState>;
 /// `std::collections::HashSet` with foldhash's fast hasher.
 pub type HashSet<K> = std::collections::HashSet<K, foldhash::fast::RandomState>;
+
+/// A fast hasher for small integer keys (FxHash's multiply-rotate, no seed).
+#[derive(Clone, Copy, Default)]
+pub struct FxHasher(u64);
+
+impl std::hash::Hasher for FxHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(b as u64);
+        }
+    }
+    fn write_u32(&mut self, i: u32) {
+        self.write_u64(i as u64);
+    }
+    fn write_u64(&mut self, i: u64) {
+        self.0 = (self.0.rotate_left(5) ^ i).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+    fn write_usize(&mut self, i: usize) {
+        self.write_u64(i as u64);
+    }
+}
+
+/// Build hasher of [`FxHasher`].
+pub type FxBuild = std::hash::BuildHasherDefault<FxHasher>;
+/// `std::collections::HashMap` with [`FxHasher`].
+pub type FxMap<K, V> = std::collections::HashMap<K, V, FxBuild>;
+/// `std::collections::HashSet` with [`FxHasher`].
+pub type FxSet<K> = std::collections::HashSet<K, FxBuild>;

@@ -12,7 +12,7 @@
 #[path = "common/holes.rs"]
 mod holes;
 
-use holefill::bvh::{tri_box, Bvh};
+use holefill::geometry::bvh::{tri_box, Bvh};
 use holefill::io::RawMesh;
 use holes::Soup;
 use std::process::Command;
@@ -40,7 +40,7 @@ fn intersecting_patch_faces(out: &RawMesh, first: usize) -> usize {
         let (p, pk) = (tri(f), keys(f));
         let (lo, hi) = tri_box(&p);
         let hit = tree.query(lo, hi, |g| {
-            g != f && holefill::check::tri_tri(&p, &pk, &tri(g), &keys(g))
+            g != f && holefill::geometry::predicates::tri_tri(&p, &pk, &tri(g), &keys(g))
         });
         bad += hit as usize;
     }

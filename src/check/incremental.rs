@@ -11,12 +11,13 @@
 //! smallest such face.
 
 use super::{
-    check_topology, degenerate_reason, face_tri, patch_positions, quality, tri_axis, tri_tri_axes,
-    vertex_key, CheckFailure, NEW_KEY,
+    check_topology, degenerate_reason, face_tri, patch_positions, quality, vertex_key,
+    CheckFailure, Degeneracy, Meets, TopologyFailure, NEW_KEY,
 };
-use crate::bvh::{boxes_meet, tri_box, Bvh};
-use crate::fill::Patch;
+use crate::geometry::bvh::{boxes_meet, tri_box, Bvh};
+use crate::geometry::predicates::{tri_axis, tri_tri_axes};
 use crate::mesh::{Mesh, VertexId};
+use crate::patch::Patch;
 use crate::policy::Checks;
 use crate::report::PatchQuality;
 use glam::DVec3;
@@ -61,7 +62,7 @@ pub struct PatchChecks<'a> {
     patch: Patch,
     tris: Vec<Tri>,
     /// Why each patch triangle is degenerate (`None`: it is not).
-    degenerate: Vec<Option<String>>,
+    degenerate: Vec<Option<Degeneracy>>,
     /// Failing pairs of patch triangles `(i, j)`, `i < j`, ascending (pairs with a
     /// degenerate triangle are not tested: while it is there, it is what fails).
     pp: Vec<(usize, usize)>,
@@ -76,7 +77,7 @@ pub struct Change {
     at: Vec<usize>,
     new: Vec<[u32; 3]>,
     tris: Vec<Tri>,
-    degenerate: Vec<Option<String>>,
+    degenerate: Vec<Option<Degeneracy>>,
     pp: Vec<(usize, usize)>,
     pm: Vec<(usize, u32)>,
 }
@@ -202,17 +203,23 @@ impl<'a> PatchChecks<'a> {
             .enumerate()
             .find_map(|(i, d)| d.as_ref().map(|r| (i, r)))
         {
-            return Err(CheckFailure::Degenerate(i, r.clone()));
+            return Err(CheckFailure::Degenerate {
+                triangle: i,
+                why: *r,
+            });
         }
         if self.opts.self_intersection {
             if let Some(&(i, j)) = self.pp.first() {
-                return Err(CheckFailure::SelfIntersection(
-                    i,
-                    format!("patch triangle {j}"),
-                ));
+                return Err(CheckFailure::SelfIntersection {
+                    triangle: i,
+                    meets: Meets::PatchTriangle(j),
+                });
             }
             if let Some(&(i, f)) = self.pm.first() {
-                return Err(CheckFailure::SelfIntersection(i, format!("mesh face {f}")));
+                return Err(CheckFailure::SelfIntersection {
+                    triangle: i,
+                    meets: Meets::MeshFace(f as usize),
+                });
             }
         }
         Ok(quality(&self.pos, self.hole.len(), &self.patch))
@@ -244,19 +251,24 @@ impl<'a> PatchChecks<'a> {
             .filter(|&i| !gone(i))
             .find_map(|i| self.degenerate[i].as_ref().map(|r| (at[i], r)))
         {
-            return Err(CheckFailure::Degenerate(i, r.clone()));
+            return Err(CheckFailure::Degenerate {
+                triangle: i,
+                why: *r,
+            });
         }
         let min_angle = self.opts.min_angle_deg.to_radians();
         for (a, t) in added.iter().enumerate() {
             if t.iter().any(|&i| i as usize >= self.pos.len()) {
-                return Err(CheckFailure::Topology(format!(
-                    "triangle {} has an index out of range",
-                    kept + a
+                return Err(CheckFailure::Topology(TopologyFailure::IndexOutOfRange(
+                    kept + a,
                 )));
             }
             let [x, y, z] = t.map(|i| self.pos[i as usize]);
             if let Some(r) = degenerate_reason(x, y, z, min_angle) {
-                return Err(CheckFailure::Degenerate(kept + a, r));
+                return Err(CheckFailure::Degenerate {
+                    triangle: kept + a,
+                    why: r,
+                });
             }
         }
         if self.opts.self_intersection {
@@ -281,10 +293,10 @@ impl<'a> PatchChecks<'a> {
                 }
             }
             if let Some(&(i, j)) = pp.iter().min() {
-                return Err(CheckFailure::SelfIntersection(
-                    i,
-                    format!("patch triangle {j}"),
-                ));
+                return Err(CheckFailure::SelfIntersection {
+                    triangle: i,
+                    meets: Meets::PatchTriangle(j),
+                });
             }
             let mut pm: Vec<(usize, u32)> = self
                 .pm
@@ -300,7 +312,10 @@ impl<'a> PatchChecks<'a> {
                 }
             }
             if let Some(&(i, f)) = pm.iter().min() {
-                return Err(CheckFailure::SelfIntersection(i, format!("mesh face {f}")));
+                return Err(CheckFailure::SelfIntersection {
+                    triangle: i,
+                    meets: Meets::MeshFace(f as usize),
+                });
             }
         }
         let pos = patch_positions(self.mesh, self.hole, q);
@@ -353,7 +368,10 @@ impl<'a> PatchChecks<'a> {
                 None => self.degenerate[i].as_ref().map(|r| (i, r)),
             });
         if let Some((i, r)) = degenerate_now {
-            let e = CheckFailure::Degenerate(i, r.clone());
+            let e = CheckFailure::Degenerate {
+                triangle: i,
+                why: *r,
+            };
             return (change, q, Err(e));
         }
         if self.opts.self_intersection {
@@ -396,11 +414,17 @@ impl<'a> PatchChecks<'a> {
             change.pp = pp;
             change.pm = pm;
             if let Some((i, j)) = first_pp {
-                let e = CheckFailure::SelfIntersection(i, format!("patch triangle {j}"));
+                let e = CheckFailure::SelfIntersection {
+                    triangle: i,
+                    meets: Meets::PatchTriangle(j),
+                };
                 return (change, q, Err(e));
             }
             if let Some((i, f)) = first_pm {
-                let e = CheckFailure::SelfIntersection(i, format!("mesh face {f}"));
+                let e = CheckFailure::SelfIntersection {
+                    triangle: i,
+                    meets: Meets::MeshFace(f as usize),
+                };
                 return (change, q, Err(e));
             }
         }
@@ -450,8 +474,8 @@ impl<'a> PatchChecks<'a> {
         if (b as usize) < k {
             let (va, vb) = (self.hole[a as usize], self.hole[b as usize]);
             if self.mesh.topo.neighbors(va).contains(&vb) {
-                return Err(CheckFailure::Topology(format!(
-                    "chord {a}-{b} duplicates an existing mesh edge"
+                return Err(CheckFailure::Topology(TopologyFailure::ChordIsMeshEdge(
+                    a, b,
                 )));
             }
         }
@@ -470,7 +494,7 @@ impl<'a> PatchChecks<'a> {
         for (c, &i) in at.iter().enumerate() {
             self.patch.triangles[i] = change.new[c];
             self.tris[i] = change.tris[c].clone();
-            self.degenerate[i] = change.degenerate[c].clone();
+            self.degenerate[i] = change.degenerate[c];
         }
         if self.opts.self_intersection {
             if change.degenerate.iter().all(Option::is_none)

@@ -85,9 +85,13 @@
 //! softer regression (`iterations = 1`, `gamma / 4`). On the shared bench (35 holes)
 //! this closes every hole; before, homer's folded hole 3 and a bunny hole failed.
 
-use super::{geom, FillContext, FillError, Patch};
+use super::kit::{
+    check_patch_size, residual, retry, triangulate, Deadline, FillContext, FillError,
+};
 use crate::fasthash::HashSet;
+use crate::geometry::measure;
 use crate::mesh::{Mesh, VertexId};
+use crate::patch::{Hole, Patch};
 use faer::linalg::solvers::Solve;
 use faer::sparse::{SparseColMat, Triplet};
 use faer::{Mat, Side};
@@ -121,11 +125,11 @@ pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
 }
 
 /// [`fill`], with the quality of the checks the patch passed (see
-/// [`super::run_method_checked`]).
+/// [`crate::fill::dispatch::run_method_checked`]).
 pub fn fill_checked(
     ctx: &FillContext,
 ) -> Result<(Patch, Option<crate::report::PatchQuality>), FillError> {
-    super::check_patch_size(ctx)?;
+    check_patch_size(ctx)?;
     let p = ctx.policy.clone();
     let mut soft = p.clone();
     soft.lssvm.iterations = 1;
@@ -137,7 +141,7 @@ pub fn fill_checked(
         ("residual front, one iteration, gamma / 4", soft),
         ("minimum-area initial patch", ctx.policy.clone()),
     ];
-    super::wavefront::retry::first_passing_at(ctx, &variants, |at, c| {
+    retry::first_passing_at(ctx, &variants, |at, c| {
         let start = match at {
             4 => Start::MinArea,
             1 | 3 => Start::ResidualFront,
@@ -162,8 +166,8 @@ pub enum Start {
 /// The initial patch closing the whole loop as a residual front.
 fn min_area_start(ctx: &FillContext) -> Result<Patch, FillError> {
     let pts = ctx.boundary_positions();
-    let forbidden = super::min_area_fair::forbidden_chords(ctx.mesh, &ctx.hole.vertices);
-    let outside = super::min_area_fair::outside_normals(ctx.mesh, &ctx.hole.vertices);
+    let forbidden = triangulate::forbidden_chords(ctx.mesh, &ctx.hole.vertices);
+    let outside = triangulate::outside_normals(ctx.mesh, &ctx.hole.vertices);
     let mut faces = HashSet::default();
     for &v in &ctx.hole.vertices {
         faces.extend(ctx.mesh.topo.vertex_faces(v));
@@ -171,15 +175,14 @@ fn min_area_start(ctx: &FillContext) -> Result<Patch, FillError> {
     let mut faces: Vec<_> = faces.into_iter().collect();
     faces.sort_unstable();
     let context: Vec<[DVec3; 3]> = faces.into_iter().map(|f| ctx.mesh.tri(f)).collect();
-    let input = super::wavefront::residual::Residual {
+    let input = residual::Residual {
         ring: &pts,
         forbidden: &forbidden,
         outside_normals: &outside,
         context: &context,
         edge_length: ctx.hole.mean_edge_length,
     };
-    let (new_vertices, triangles) =
-        super::wavefront::residual::close(&input, ctx.policy, &ctx.deadline)?;
+    let (new_vertices, triangles) = residual::close(&input, ctx.policy, &ctx.deadline)?;
     Ok(Patch {
         new_vertices,
         triangles,
@@ -280,7 +283,7 @@ fn vertex_normals(pos: &[DVec3], k: usize, triangles: &[[u32; 3]]) -> Vec<DVec3>
     let mut acc = vec![DVec3::ZERO; pos.len().saturating_sub(k)];
     for t in triangles {
         let [a, b, c] = t.map(|i| pos[i as usize]);
-        let n = geom::tri_normal_raw(a, b, c);
+        let n = measure::tri_normal_raw(a, b, c);
         for &i in t {
             if i as usize >= k {
                 acc[i as usize - k] += n;
@@ -330,14 +333,14 @@ fn is_sound(boundary: &[DVec3], old: &[DVec3], new: &[DVec3], triangles: &[[u32;
     for t in triangles {
         let [a, b, c] = t.map(|i| at(new, i));
         let [a0, b0, c0] = t.map(|i| at(old, i));
-        let min0 = geom::angles(a0, b0, c0)
+        let min0 = measure::angles(a0, b0, c0)
             .into_iter()
             .fold(f64::INFINITY, f64::min);
         let floor = min.min(min0);
-        if !geom::angles(a, b, c).iter().all(|&x| x >= floor) {
+        if !measure::angles(a, b, c).iter().all(|&x| x >= floor) {
             return false;
         }
-        normals.push(geom::tri_normal_raw(a, b, c).normalize_or_zero());
+        normals.push(measure::tri_normal_raw(a, b, c).normalize_or_zero());
     }
     let mut by_edge: crate::fasthash::HashMap<(u32, u32), usize> =
         crate::fasthash::HashMap::default();
@@ -387,7 +390,7 @@ impl Guide {
 }
 
 /// The RBF width: `kernel_width` times the loop's radius `perimeter / 2π`.
-pub fn kernel_sigma(opts: &crate::policy::Lssvm, hole: &super::Hole) -> f64 {
+pub fn kernel_sigma(opts: &crate::policy::Lssvm, hole: &Hole) -> f64 {
     opts.kernel_width * hole.perimeter / std::f64::consts::TAU
 }
 
@@ -401,7 +404,7 @@ pub fn initial_front(
     hole: &[VertexId],
     edge: f64,
     merge_distance: f64,
-    deadline: &super::Deadline,
+    deadline: &Deadline,
 ) -> Result<Patch, FillError> {
     initial_front_with(mesh, hole, edge, merge_distance, deadline, false)
 }
@@ -413,7 +416,7 @@ pub fn initial_front_with(
     hole: &[VertexId],
     edge: f64,
     merge_distance: f64,
-    deadline: &super::Deadline,
+    deadline: &Deadline,
     residual: bool,
 ) -> Result<Patch, FillError> {
     let k = hole.len();
@@ -477,7 +480,7 @@ pub fn initial_front_with(
 /// mean of its vertex normals (`normals`). `None` when neither works.
 fn project_loop(pts: &[DVec3], normals: &[DVec3]) -> Option<Vec<DVec3>> {
     let mean = normals.iter().copied().sum::<DVec3>().normalize_or_zero();
-    [geom::newell_normal(pts), mean]
+    [measure::newell_normal(pts), mean]
         .into_iter()
         .find_map(|n| project_along(pts, n))
 }
@@ -513,11 +516,7 @@ fn project_along(pts: &[DVec3], n: DVec3) -> Option<Vec<DVec3>> {
 }
 
 /// Runs a front until every loop is closed.
-fn run_front(
-    front: Option<Front>,
-    k: usize,
-    deadline: &super::Deadline,
-) -> Result<Patch, FillError> {
+fn run_front(front: Option<Front>, k: usize, deadline: &Deadline) -> Result<Patch, FillError> {
     let mut f = front
         .ok_or_else(|| FillError::Failed("the loop's projection is not a simple polygon".into()))?;
     let cap = k * k + 100 * k + 1000;
@@ -591,7 +590,7 @@ struct Front {
     /// Front edges and obstacles farther than this from a step's vertex are not tested.
     radius: f64,
     /// Close a stuck loop as a residual front (with this deadline) instead of failing.
-    residual: Option<super::Deadline>,
+    residual: Option<Deadline>,
 }
 
 struct Obstacle {
@@ -607,7 +606,7 @@ impl Obstacle {
             ids,
             pts,
             centre: (pts[0] + pts[1] + pts[2]) / 3.0,
-            normal: geom::tri_normal_raw(pts[0], pts[1], pts[2]).normalize_or_zero(),
+            normal: measure::tri_normal_raw(pts[0], pts[1], pts[2]).normalize_or_zero(),
         }
     }
 }
@@ -679,7 +678,7 @@ impl Front {
                 obstacles.push(Obstacle::new(ids, t.map(|w| mesh.pos(w))));
             }
         }
-        let centre = geom::centroid(&pos);
+        let centre = measure::centroid(&pos);
         let reach = 1.2
             * pos
                 .iter()
@@ -720,7 +719,7 @@ impl Front {
 
     fn add_triangles(&mut self, tris: &[[u32; 3]]) {
         for t in tris {
-            let n = geom::tri_normal_raw(
+            let n = measure::tri_normal_raw(
                 self.pos[t[0] as usize],
                 self.pos[t[1] as usize],
                 self.pos[t[2] as usize],
@@ -799,7 +798,7 @@ impl Front {
             .map(|&p| self.guide.at(p))
             .sum::<DVec3>()
             .normalize_or_zero();
-        let newell = geom::newell_normal(&pts);
+        let newell = measure::newell_normal(&pts);
         if let Some(out) = self
             .clip_ear(lp, newell)
             .or_else(|| self.clip_ear(lp, mean_guide))
@@ -821,8 +820,8 @@ impl Front {
         Ok(Vec::new())
     }
 
-    /// Closes loop `lp` with [`super::wavefront::residual::close`].
-    fn close_residual(&mut self, lp: &[u32], deadline: &super::Deadline) -> Result<(), FillError> {
+    /// Closes loop `lp` with [`residual::close`].
+    fn close_residual(&mut self, lp: &[u32], deadline: &Deadline) -> Result<(), FillError> {
         let m = lp.len();
         if lp.iter().collect::<HashSet<_>>().len() != m {
             return Err(FillError::Failed("the loop passes a vertex twice".into()));
@@ -845,14 +844,14 @@ impl Front {
             .collect();
         let outside = vec![None; m];
         let policy = crate::policy::Policy::default();
-        let input = super::wavefront::residual::Residual {
+        let input = residual::Residual {
             ring: &pts,
             forbidden: &forbidden,
             outside_normals: &outside,
             context: &context,
             edge_length: self.edge,
         };
-        let (new_pts, tris) = super::wavefront::residual::close(&input, &policy, deadline)?;
+        let (new_pts, tris) = residual::close(&input, &policy, deadline)?;
         let base = self.pos.len() as u32;
         for p in new_pts {
             self.pos.push(p);
@@ -913,7 +912,7 @@ impl Front {
             }) {
                 continue;
             }
-            let a = geom::angles(pts[i0], pts[j], pts[i2]);
+            let a = measure::angles(pts[i0], pts[j], pts[i2]);
             let score = a[0].min(a[1]).min(a[2]);
             if best.is_none_or(|(bs, _)| score > bs) {
                 best = Some((score, j));
@@ -1015,11 +1014,11 @@ impl Front {
                 new_edges.push((a, b));
             }
             let [x, y, z] = t.map(at);
-            let nt = geom::tri_normal_raw(x, y, z);
+            let nt = measure::tri_normal_raw(x, y, z);
             if !positive(nt.dot(n)) || !positive(nt.dot(self.guide.at((x + y + z) / 3.0))) {
                 return None;
             }
-            let angs = geom::angles(x, y, z);
+            let angs = measure::angles(x, y, z);
             if angs
                 .iter()
                 .any(|&a| a.is_nan() || a < FRONT_MIN_ANGLE_DEG.to_radians())
@@ -1271,9 +1270,9 @@ fn cot_laplacian(
     let mut at: BTreeMap<u32, DVec3> = BTreeMap::new();
     for &(x, y, ix, iy) in fan {
         // cot at x faces edge p-y; cot at y faces edge p-x
-        *w.entry(iy).or_insert(0.0) += geom::cot_at(x, y, p);
-        *w.entry(ix).or_insert(0.0) += geom::cot_at(y, p, x);
-        area += geom::tri_area(p, x, y) / 3.0;
+        *w.entry(iy).or_insert(0.0) += measure::cot_at(x, y, p);
+        *w.entry(ix).or_insert(0.0) += measure::cot_at(y, p, x);
+        area += measure::tri_area(p, x, y) / 3.0;
         at.insert(ix, x);
         at.insert(iy, y);
     }
@@ -1325,7 +1324,7 @@ pub fn training_set(mesh: &Mesh, hole: &[VertexId], rings: usize) -> (Vec<DVec3>
         }
         layers.push(layer);
     }
-    let centroid = geom::centroid(&hole.iter().map(|&v| mesh.pos(v)).collect::<Vec<_>>());
+    let centroid = measure::centroid(&hole.iter().map(|&v| mesh.pos(v)).collect::<Vec<_>>());
     let mut chosen: Vec<VertexId> = Vec::new();
     for layer in layers.iter().skip(1) {
         let mut cand: Vec<VertexId> = layer
@@ -1745,8 +1744,9 @@ pub fn solve_poisson(
 mod tests {
     use super::*;
     use crate::check::{check_degenerate, check_topology, patch_positions};
-    use crate::fill::{apply_patch, Deadline, Hole};
+    use crate::fill::kit::Deadline;
     use crate::io::RawMesh;
+    use crate::patch::{apply_patch, Hole};
     use crate::policy::{Checks, Policy};
     use rand::{Rng, SeedableRng};
 
@@ -1774,8 +1774,8 @@ mod tests {
         let lp = loops
             .into_iter()
             .min_by(|a, b| {
-                let ca = geom::centroid(&a.iter().map(|&v| mesh.pos(v)).collect::<Vec<_>>());
-                let cb = geom::centroid(&b.iter().map(|&v| mesh.pos(v)).collect::<Vec<_>>());
+                let ca = measure::centroid(&a.iter().map(|&v| mesh.pos(v)).collect::<Vec<_>>());
+                let cb = measure::centroid(&b.iter().map(|&v| mesh.pos(v)).collect::<Vec<_>>());
                 (ca - centre).length().total_cmp(&(cb - centre).length())
             })
             .unwrap();

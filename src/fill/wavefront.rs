@@ -106,17 +106,16 @@
 // `!(x > bound)` is used on purpose: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-pub mod residual;
-pub mod retry;
-
-use super::{FillContext, FillError, Patch};
+use super::kit::{check_patch_size, residual, retry, FillContext, FillError};
 use crate::fasthash::{HashMap, HashSet};
+use crate::geometry::measure;
+use crate::geometry::predicates::{ccw2d, overlap2d, overlap2d_ccw, p2, seg_crosses_tri, P2};
+use crate::patch::Patch;
 use crate::policy::{Policy, Wavefront, WavefrontPlacement};
 use crate::report::PatchQuality;
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use robust::{orient2d, orient3d, Coord, Coord3D};
 use std::cmp::{Ordering, Reverse};
 use std::collections::BinaryHeap;
 use std::f64::consts::{FRAC_PI_4, PI, TAU};
@@ -159,7 +158,7 @@ pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
 }
 
 /// [`fill`], with the quality of the checks the patch passed (see
-/// [`super::run_method_checked`]).
+/// [`crate::fill::dispatch::run_method_checked`]).
 pub fn fill_checked(ctx: &FillContext) -> Result<(Patch, Option<PatchQuality>), FillError> {
     // a hole whose patch would pass `limits.max_patch_triangles` is left to the next
     // method at once (the front's cost grows faster than its triangle count: a round
@@ -172,7 +171,7 @@ pub fn fill_checked(ctx: &FillContext) -> Result<(Patch, Option<PatchQuality>), 
             ctx.hole.len()
         )));
     }
-    super::check_patch_size(ctx)?;
+    check_patch_size(ctx)?;
     // a front that ran away under the policy's settings runs away under the other
     // full-front settings too (measured: all four on the bench hole that does), so
     // after one does, only the variants that close a residual early are run
@@ -742,28 +741,6 @@ fn unit_or(v: DVec3, fallback: DVec3) -> DVec3 {
     }
 }
 
-fn c3(p: DVec3) -> Coord3D<f64> {
-    Coord3D {
-        x: p.x,
-        y: p.y,
-        z: p.z,
-    }
-}
-
-/// Does segment `ab` cross triangle `t` (touching counts; coplanar configurations do not)?
-fn seg_tri(a: DVec3, b: DVec3, t: &[DVec3; 3]) -> bool {
-    let (t0, t1, t2) = (c3(t[0]), c3(t[1]), c3(t[2]));
-    let da = orient3d(t0, t1, t2, c3(a));
-    let db = orient3d(t0, t1, t2, c3(b));
-    if (da > 0.0 && db > 0.0) || (da < 0.0 && db < 0.0) || (da == 0.0 && db == 0.0) {
-        return false;
-    }
-    let s0 = orient3d(c3(a), c3(b), t0, t1);
-    let s1 = orient3d(c3(a), c3(b), t1, t2);
-    let s2 = orient3d(c3(a), c3(b), t2, t0);
-    (s0 >= 0.0 && s1 >= 0.0 && s2 >= 0.0) || (s0 <= 0.0 && s1 <= 0.0 && s2 <= 0.0)
-}
-
 /// Do two triangles cross in 3D away from their shared corners? Edges touching a shared
 /// corner are not tested (they meet the other triangle there by construction).
 fn cross3d(ai: [Option<u32>; 3], a: &[DVec3; 3], bi: [Option<u32>; 3], b: &[DVec3; 3]) -> bool {
@@ -774,7 +751,7 @@ fn cross3d(ai: [Option<u32>; 3], a: &[DVec3; 3], bi: [Option<u32>; 3], b: &[DVec
             if shared(xi[e], &yi) || shared(xi[f], &yi) {
                 continue;
             }
-            if seg_tri(x[e], x[f], y) {
+            if seg_crosses_tri(x[e], x[f], y) {
                 return true;
             }
         }
@@ -786,7 +763,7 @@ fn cross3d(ai: [Option<u32>; 3], a: &[DVec3; 3], bi: [Option<u32>; 3], b: &[DVec
 struct Candidate {
     ids: [Option<u32>; 3],
     /// Projected into the tangent plane, counter-clockwise; `None` when degenerate.
-    ccw: Option<[Coord<f64>; 3]>,
+    ccw: Option<[P2; 3]>,
     box2: Box2,
     box3: Box3,
 }
@@ -798,7 +775,7 @@ struct Box2 {
 }
 
 impl Box2 {
-    fn of(t: &[Coord<f64>; 3]) -> Box2 {
+    fn of(t: &[P2; 3]) -> Box2 {
         Box2 {
             lo: [
                 t[0].x.min(t[1].x).min(t[2].x),
@@ -838,37 +815,6 @@ impl Box3 {
     }
 }
 
-/// The triangle counter-clockwise, or `None` when it is degenerate (exact).
-fn ccw2d(t: [Coord<f64>; 3]) -> Option<[Coord<f64>; 3]> {
-    let o = orient2d(t[0], t[1], t[2]);
-    if o > 0.0 {
-        Some(t)
-    } else if o < 0.0 {
-        Some([t[0], t[2], t[1]])
-    } else {
-        None
-    }
-}
-
-/// Do two projected triangles overlap with positive area? A degenerate first triangle
-/// counts as overlapping. Exact (separating-axis test over the six edges with `orient2d`).
-fn overlap2d(a: [Coord<f64>; 3], b: [Coord<f64>; 3]) -> bool {
-    let Some(a) = ccw2d(a) else { return true };
-    overlap2d_ccw(a, b)
-}
-
-/// [`overlap2d`] with the first triangle already counter-clockwise.
-fn overlap2d_ccw(a: [Coord<f64>; 3], b: [Coord<f64>; 3]) -> bool {
-    let Some(b) = ccw2d(b) else { return false };
-    let separates = |s: &[Coord<f64>; 3], o: &[Coord<f64>; 3]| {
-        (0..3).any(|e| {
-            let (p, q) = (s[e], s[(e + 1) % 3]);
-            o.iter().all(|&r| orient2d(p, q, r) <= 0.0)
-        })
-    };
-    !(separates(&a, &b) || separates(&b, &a))
-}
-
 impl Wave {
     fn new(ctx: &FillContext, opts: &Wavefront, len: f64) -> Result<Wave, FillError> {
         let mesh = ctx.mesh;
@@ -890,8 +836,8 @@ impl Wave {
             }
         }
         let pos: Vec<DVec3> = hole.iter().map(|&v| mesh.pos(v)).collect();
-        let fallback_normal = unit_or(super::geom::newell_normal(&pos), DVec3::Z);
-        let centre = super::geom::centroid(&pos);
+        let fallback_normal = unit_or(measure::newell_normal(&pos), DVec3::Z);
+        let centre = measure::centroid(&pos);
         let pu = fallback_normal.any_orthonormal_vector();
         let pw = fallback_normal.cross(pu);
         let loop2d: Vec<(f64, f64)> = pos
@@ -909,7 +855,7 @@ impl Wave {
                 .fold(0.0, f64::max)
             + 2.0 * len;
         let max_area = if opts.max_area_ratio > 0.0 {
-            opts.max_area_ratio * super::geom::vector_area(&pos)
+            opts.max_area_ratio * measure::vector_area(&pos)
         } else {
             f64::INFINITY
         };
@@ -1437,10 +1383,7 @@ impl Wave {
         }
         let vert = |w: &Wave, n: u32| w.nodes[n as usize].vert;
         let pts: Vec<DVec3> = ring.iter().map(|&n| self.p(n)).collect();
-        let nrm = unit_or(
-            super::geom::newell_normal(&pts),
-            self.expected_normal(start),
-        );
+        let nrm = unit_or(measure::newell_normal(&pts), self.expected_normal(start));
         while ring.len() > 3 {
             let m = ring.len();
             let mut best: Option<(bool, f64, usize)> = None;
@@ -1451,7 +1394,7 @@ impl Wave {
                 }
                 let p = t.map(|x| self.pos[x as usize]);
                 let n = unit_or((p[1] - p[0]).cross(p[2] - p[0]), DVec3::ZERO);
-                let ang = super::geom::angles(p[0], p[1], p[2]);
+                let ang = measure::angles(p[0], p[1], p[2]);
                 let key = (n.dot(nrm) > FACING_MIN, ang[0].min(ang[1]).min(ang[2]), i);
                 if best.is_none_or(|b| (key.0, key.1) > (b.0, b.1)) {
                     best = Some(key);
@@ -1686,7 +1629,7 @@ impl Wave {
         let last = chain.len() - 1;
         let pp = self.p(self.nodes[pn as usize].prev);
         let qq = self.p(self.nodes[nn as usize].next);
-        let front_angle = |at: DVec3, a: DVec3, b: DVec3| super::geom::angle_at(at, a, b);
+        let front_angle = |at: DVec3, a: DVec3, b: DVec3| measure::angle_at(at, a, b);
         if self.front_size[nd.front as usize] > 3
             && !self.relaxed
             && (front_angle(p, pp, pos_of(1)) < MIN_FRONT_ANGLE
@@ -1773,7 +1716,7 @@ impl Wave {
                 return false;
             }
             // a sliver whose longest edge has a mesh face across cannot be flipped away
-            let ang = super::geom::angles(p[0], p[1], p[2]);
+            let ang = measure::angles(p[0], p[1], p[2]);
             let c = (0..3).fold(0, |m, c| if ang[c] > ang[m] { c } else { m });
             let v = [vert_of(s), vert_of(x1), vert_of(x2)];
             let (a, b) = (v[(c + 1) % 3], v[(c + 2) % 3]);
@@ -1809,7 +1752,7 @@ impl Wave {
         let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
         for t in tris {
             let p = t.map(at);
-            if !(super::geom::smallest_angle(p[0], p[1], p[2]) >= min_angle) {
+            if !(measure::smallest_angle(p[0], p[1], p[2]) >= min_angle) {
                 return false;
             }
             let n = unit_or((p[1] - p[0]).cross(p[2] - p[0]), DVec3::ZERO);
@@ -1826,10 +1769,7 @@ impl Wave {
         let o = self.pos[v as usize];
         let u = nrm.any_orthonormal_vector();
         let w = nrm.cross(u);
-        let proj = |x: DVec3| Coord {
-            x: (x - o).dot(u),
-            y: (x - o).dot(w),
-        };
+        let proj = |x: DVec3| p2((x - o).dot(u), (x - o).dot(w));
         let pr = |t: &[DVec3; 3]| [proj(t[0]), proj(t[1]), proj(t[2])];
         for i in 0..corners.len() {
             for j in 0..i {
@@ -1900,7 +1840,7 @@ impl Wave {
     fn flip_slivers(&mut self) {
         let tau = (2.0 * self.min_angle).max(1f64.to_radians());
         let min_of = |p: [DVec3; 3]| {
-            let a = super::geom::angles(p[0], p[1], p[2]);
+            let a = measure::angles(p[0], p[1], p[2]);
             a[0].min(a[1]).min(a[2])
         };
         let mut owner: HashMap<(u32, u32), usize> =
@@ -1915,7 +1855,7 @@ impl Wave {
             for i in 0..self.tris.len() {
                 let t = self.tris[i];
                 let p = t.map(|v| self.pos[v as usize]);
-                let ang = super::geom::angles(p[0], p[1], p[2]);
+                let ang = measure::angles(p[0], p[1], p[2]);
                 if !(ang[0].min(ang[1]).min(ang[2]) < tau) {
                     continue;
                 }
@@ -2096,9 +2036,10 @@ impl Wave {
 mod tests {
     use super::*;
     use crate::check::{check_degenerate, check_topology, patch_positions};
-    use crate::fill::{apply_patch, Deadline, Hole};
+    use crate::fill::kit::Deadline;
     use crate::io::RawMesh;
     use crate::mesh::{Mesh, VertexId};
+    use crate::patch::{apply_patch, Hole};
     use crate::policy::{Method, Policy};
     use proptest::prelude::*;
 
@@ -2647,25 +2588,26 @@ mod tests {
             .check_patch(&mesh, &hole.vertices, &patch, &policy.checks)
             .unwrap();
         accept(&mesh, &hole, &patch, &policy);
-        use crate::fill::relax::RELAX_STEP;
+        use crate::fill::kit::relax::RELAX_STEP;
         // relaxed as a whole, a vertex slides across a fold of the patch (two patch
         // triangles cross); relaxed with the vertices there held, it passes, with
         // better triangles than as made
         let check = |p: &Patch| checker.check_patch(&mesh, &hole.vertices, p, &policy.checks);
         let mut whole = patch.clone();
         let iterations = policy.fair.tangential_relax;
-        crate::fill::relax::tangential_relax(&mesh, &hole, &mut whole, iterations, RELAX_STEP);
+        crate::fill::kit::relax::tangential_relax(&mesh, &hole, &mut whole, iterations, RELAX_STEP);
         assert!(
             matches!(
                 check(&whole),
-                Err(crate::check::CheckFailure::SelfIntersection(..))
+                Err(crate::check::CheckFailure::SelfIntersection { .. })
             ),
             "{:?}",
             check(&whole)
         );
-        let (relaxed, q) =
-            crate::fill::relax::relax_checked(&mesh, &hole, &patch, iterations, RELAX_STEP, check)
-                .expect("the relaxation with held vertices passes");
+        let (relaxed, q) = crate::fill::kit::relax::relax_checked(
+            &mesh, &hole, &patch, iterations, RELAX_STEP, check,
+        )
+        .expect("the relaxation with held vertices passes");
         assert!(q.q_good_share > made.q_good_share, "{q:?} vs {made:?}");
         assert!(q.min_angle_deg > made.min_angle_deg, "{q:?} vs {made:?}");
         accept(&mesh, &hole, &relaxed, &policy);

@@ -2,93 +2,13 @@
 //! patch and a simple umbrella relaxation of the new vertices (the local stand-in for
 //! the patch fairing of `fill::fair`).
 
-use crate::fill::geom;
+use crate::fasthash::{FxMap, FxSet};
+use crate::geometry::measure;
 use glam::DVec3;
-use std::collections::{HashMap, HashSet};
 use std::f64::consts::PI;
 
-/// Smallest interior angle of a triangle (radians): the angle opposite its shortest
-/// edge (0 for a degenerate triangle).
-pub fn min_angle(a: DVec3, b: DVec3, c: DVec3) -> f64 {
-    let (la, lb, lc) = (
-        (b - c).length_squared(),
-        (c - a).length_squared(),
-        (a - b).length_squared(),
-    );
-    // the corner opposite the shortest edge, and its two edges
-    let (p, q, r) = if la <= lb && la <= lc {
-        (a, b, c)
-    } else if lb <= lc {
-        (b, c, a)
-    } else {
-        (c, a, b)
-    };
-    let (u, v) = (q - p, r - p);
-    let cr = u.cross(v).length();
-    let dt = u.dot(v);
-    if cr == 0.0 && dt == 0.0 {
-        0.0
-    } else {
-        cr.atan2(dt)
-    }
-}
-
-/// Sine of the smallest interior angle (which is at most 60 degrees, so the sine is
-/// monotonic in it): cheaper than [`min_angle`] for comparisons.
-pub fn min_angle_sin(a: DVec3, b: DVec3, c: DVec3) -> f64 {
-    let (la, lb, lc) = (
-        (b - c).length_squared(),
-        (c - a).length_squared(),
-        (a - b).length_squared(),
-    );
-    let (p, q, r, l1, l2) = if la <= lb && la <= lc {
-        (a, b, c, lc, lb)
-    } else if lb <= lc {
-        (b, c, a, la, lc)
-    } else {
-        (c, a, b, lb, la)
-    };
-    let d = (l1 * l2).sqrt();
-    if d > 0.0 {
-        (q - p).cross(r - p).length() / d
-    } else {
-        0.0
-    }
-}
-
-/// A fast hasher for small integer keys (FxHash's multiply-rotate).
-#[derive(Clone, Copy, Default)]
-pub struct FxHasher(u64);
-
-impl std::hash::Hasher for FxHasher {
-    fn finish(&self) -> u64 {
-        self.0
-    }
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.write_u64(b as u64);
-        }
-    }
-    fn write_u32(&mut self, i: u32) {
-        self.write_u64(i as u64);
-    }
-    fn write_u64(&mut self, i: u64) {
-        self.0 = (self.0.rotate_left(5) ^ i).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
-    }
-    fn write_usize(&mut self, i: usize) {
-        self.write_u64(i as u64);
-    }
-}
-
-/// Build hasher of [`FxHasher`].
-pub type FxBuild = std::hash::BuildHasherDefault<FxHasher>;
-/// A hash map keyed by small integers.
-pub type FxMap<K, V> = HashMap<K, V, FxBuild>;
-/// A hash set of small integers.
-pub type FxSet<K> = HashSet<K, FxBuild>;
-
 fn unit_normal(a: DVec3, b: DVec3, c: DVec3) -> DVec3 {
-    geom::tri_normal_raw(a, b, c).normalize_or_zero()
+    measure::tri_normal_raw(a, b, c).normalize_or_zero()
 }
 
 /// What an edge swap must respect.
@@ -161,9 +81,11 @@ pub fn swap_edges(
             pos[cc as usize],
             pos[d as usize],
         );
-        let old = min_angle_sin(pa, pb, pc).min(min_angle_sin(pb, pa, pd));
+        let old =
+            measure::smallest_angle_sin(pa, pb, pc).min(measure::smallest_angle_sin(pb, pa, pd));
         // new triangles (d, b, c) and (c, a, d)
-        let new = min_angle_sin(pd, pb, pc).min(min_angle_sin(pc, pa, pd));
+        let new =
+            measure::smallest_angle_sin(pd, pb, pc).min(measure::smallest_angle_sin(pc, pa, pd));
         let better = new > old + 1e-9;
         if !better || new < min_sin {
             continue;
@@ -248,13 +170,14 @@ pub fn relax(
                         pos[i as usize]
                     }
                 });
-                let nb0 = geom::tri_normal_raw(before[0], before[1], before[2]);
-                let nb1 = geom::tri_normal_raw(after[0], after[1], after[2]);
+                let nb0 = measure::tri_normal_raw(before[0], before[1], before[2]);
+                let nb1 = measure::tri_normal_raw(after[0], after[1], after[2]);
                 if nb0.dot(nb1) <= 0.5 * nb0.length() * nb1.length() {
                     return false;
                 }
-                let s1 = min_angle_sin(after[0], after[1], after[2]);
-                s1 >= floor_sin || s1 >= min_angle_sin(before[0], before[1], before[2])
+                let s1 = measure::smallest_angle_sin(after[0], after[1], after[2]);
+                s1 >= floor_sin
+                    || s1 >= measure::smallest_angle_sin(before[0], before[1], before[2])
             });
             if ok {
                 pos[v] = cand;
@@ -272,11 +195,11 @@ mod tests {
         let a = DVec3::new(0.0, 0.0, 0.0);
         let b = DVec3::new(3.0, 0.2, 0.1);
         let c = DVec3::new(0.4, 1.0, -0.3);
-        let g = geom::angles(a, b, c);
+        let g = measure::angles(a, b, c);
         let m = g[0].min(g[1]).min(g[2]);
-        assert!((min_angle(a, b, c) - m).abs() < 1e-12);
-        assert!((min_angle_sin(a, b, c) - m.sin()).abs() < 1e-12);
-        assert_eq!(min_angle_sin(a, a, c), 0.0);
+        assert!((measure::smallest_angle(a, b, c) - m).abs() < 1e-12);
+        assert!((measure::smallest_angle_sin(a, b, c) - m.sin()).abs() < 1e-12);
+        assert_eq!(measure::smallest_angle_sin(a, a, c), 0.0);
     }
 
     #[test]

@@ -97,11 +97,13 @@ mod intersect;
 #[cfg(test)]
 mod tests;
 
-use super::{geom, FillContext, FillError, Patch};
+use super::kit::{fair, FillContext, FillError};
+use crate::fasthash::FxSet;
 use crate::fasthash::HashMap;
+use crate::geometry::measure;
 use crate::mesh::VertexId;
+use crate::patch::Patch;
 use glam::DVec3;
-use improve::FxSet;
 use intersect::{Grid, Obstacles};
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
@@ -175,11 +177,11 @@ pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
 const AREA_PER_TRIANGLE: f64 = 0.25;
 
 /// The number of triangles the front would make: the loop's projected area
-/// ([`geom::vector_area`], a lower bound of the patch's area) over the area of a
+/// ([`measure::vector_area`], a lower bound of the patch's area) over the area of a
 /// front triangle at the loop's mean incident edge length.
 fn estimated_triangles(ctx: &FillContext) -> f64 {
     let pts = ctx.boundary_positions();
-    let area = geom::vector_area(&pts);
+    let area = measure::vector_area(&pts);
     let (mut sum, mut n) = (0.0, 0usize);
     for &v in &ctx.hole.vertices {
         let m = ctx.mesh.mean_incident_edge_length(v);
@@ -387,7 +389,7 @@ impl<'a> Builder<'a> {
             return failed("the loop has zero length");
         }
         let loop_normal: Vec<DVec3> = hole.iter().map(|&v| mesh.vertex_normal(v)).collect();
-        let mut hole_normal = geom::newell_normal(&pos);
+        let mut hole_normal = measure::newell_normal(&pos);
         if hole_normal == DVec3::ZERO {
             hole_normal = loop_normal
                 .iter()
@@ -716,10 +718,10 @@ impl<'a> Builder<'a> {
         let mut normals = Vec::with_capacity(tris.len());
         for t in &tris {
             let [a, b, c] = t.map(at);
-            if improve::min_angle_sin(a, b, c) < self.p.min_angle.sin() {
+            if measure::smallest_angle_sin(a, b, c) < self.p.min_angle.sin() {
                 return None;
             }
-            let nr = geom::tri_normal_raw(a, b, c).normalize_or_zero();
+            let nr = measure::tri_normal_raw(a, b, c).normalize_or_zero();
             let facing = nr.dot(ev.nc) > 0.0;
             if !facing {
                 return None;
@@ -864,7 +866,7 @@ impl<'a> Builder<'a> {
 
     fn emit(&mut self, t: [u32; 3]) -> DVec3 {
         let [a, b, c] = t.map(|i| self.pos[i as usize]);
-        let nr = geom::tri_normal_raw(a, b, c);
+        let nr = measure::tri_normal_raw(a, b, c);
         for &v in &t {
             self.acc[v as usize] += nr;
         }
@@ -1055,7 +1057,7 @@ impl<'a> Builder<'a> {
             3 => {
                 let t = [vs[0], vs[1], vs[2]];
                 let g = t.map(|i| self.pos[i as usize]);
-                if geom::tri_normal_raw(g[0], g[1], g[2]) == DVec3::ZERO {
+                if measure::tri_normal_raw(g[0], g[1], g[2]) == DVec3::ZERO {
                     return failed("the last triangle of a front is degenerate");
                 }
                 if self.obstacles.find_overlap(&g, |_| false).is_some() {
@@ -1076,14 +1078,14 @@ impl<'a> Builder<'a> {
                         continue;
                     }
                     let g = pair.map(|t| t.map(|i| self.pos[i as usize]));
-                    let n0 = geom::tri_normal_raw(g[0][0], g[0][1], g[0][2]);
-                    let n1 = geom::tri_normal_raw(g[1][0], g[1][1], g[1][2]);
+                    let n0 = measure::tri_normal_raw(g[0][0], g[0][1], g[0][2]);
+                    let n1 = measure::tri_normal_raw(g[1][0], g[1][1], g[1][2]);
                     let unfolded = n0.dot(n1) > FOLD_COS * n0.length() * n1.length();
                     if !unfolded {
                         continue;
                     }
                     if g.iter().any(|t| {
-                        improve::min_angle(t[0], t[1], t[2])
+                        measure::smallest_angle(t[0], t[1], t[2])
                             < self.p.min_angle.min(0.5f64.to_radians())
                     }) {
                         continue;
@@ -1094,8 +1096,8 @@ impl<'a> Builder<'a> {
                     {
                         continue;
                     }
-                    let q = geom::quality(g[0][0], g[0][1], g[0][2])
-                        .min(geom::quality(g[1][0], g[1][1], g[1][2]));
+                    let q = measure::quality(g[0][0], g[0][1], g[0][2])
+                        .min(measure::quality(g[1][0], g[1][1], g[1][2]));
                     if best.is_none_or(|(bq, _)| q > bq) {
                         best = Some((q, pair));
                     }
@@ -1127,18 +1129,18 @@ impl<'a> Builder<'a> {
         }
         let vs: Vec<u32> = ns.iter().map(|&c| self.nodes[c as usize].v).collect();
         let pts: Vec<DVec3> = vs.iter().map(|&v| self.pos[v as usize]).collect();
-        let c = geom::centroid(&pts);
+        let c = measure::centroid(&pts);
         let mut up = vs.iter().map(|&v| self.vnormal(v)).sum::<DVec3>();
         if up == DVec3::ZERO {
-            up = geom::newell_normal(&pts);
+            up = measure::newell_normal(&pts);
         }
         let min_sin = self.p.min_angle.sin();
         let mut geo = Vec::with_capacity(m);
         for j in 0..m {
             let t = [pts[j], pts[(j + 1) % m], c];
-            let nr = geom::tri_normal_raw(t[0], t[1], t[2]).normalize_or_zero();
+            let nr = measure::tri_normal_raw(t[0], t[1], t[2]).normalize_or_zero();
             let behind = self.nodes[ns[j] as usize].behind;
-            if improve::min_angle_sin(t[0], t[1], t[2]) < min_sin
+            if measure::smallest_angle_sin(t[0], t[1], t[2]) < min_sin
                 || nr.dot(up) <= 0.0
                 || nr.dot(behind) < FOLD_COS
             {
@@ -1331,8 +1333,8 @@ impl<'a> Builder<'a> {
                 // the first solve's cotangent weights come from the flat front; a
                 // second solve on the curved result gets them right
                 let (mesh, hole, fair) = (self.ctx.mesh, self.ctx.hole, &self.ctx.policy.fair);
-                super::fair::fair_patch(mesh, hole, &mut patch, fair)?;
-                super::fair::fair_patch(mesh, hole, &mut patch, fair)
+                fair::fair_patch(mesh, hole, &mut patch, fair)?;
+                fair::fair_patch(mesh, hole, &mut patch, fair)
             });
             match faired {
                 Ok(()) if patch.new_vertices.len() == self.pos.len() - k => {
@@ -1381,7 +1383,7 @@ impl<'a> Builder<'a> {
 /// [`improve::relax`]), before the fairing solve.
 fn relax(
     mesh: &crate::mesh::Mesh,
-    hole: &super::Hole,
+    hole: &crate::patch::Hole,
     patch: &mut Patch,
     _opts: &crate::policy::Fair,
 ) -> Result<(), FillError> {

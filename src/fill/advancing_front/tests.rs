@@ -4,9 +4,11 @@
 
 use super::*;
 use crate::check::{check_degenerate, check_topology, patch_positions, quality};
-use crate::fill::{apply_patch, Deadline, Hole};
+use crate::fill::kit::Deadline;
+use crate::geometry::measure;
 use crate::io::RawMesh;
 use crate::mesh::Mesh;
+use crate::patch::{apply_patch, Hole};
 use crate::policy::{Checks, Policy};
 use glam::{DVec2, DVec3};
 use proptest::prelude::*;
@@ -374,7 +376,7 @@ fn tiny_loops_three_and_four() {
             .any(|t| t.contains(&a) && t.contains(&b))
     };
     let pos: Vec<DVec3> = lp.iter().map(|&v| mesh.pos(v)).collect();
-    let q = |a: usize, b: usize, c: usize| geom::quality(pos[a], pos[b], pos[c]);
+    let q = |a: usize, b: usize, c: usize| measure::quality(pos[a], pos[b], pos[c]);
     let q02 = q(0, 1, 2).min(q(2, 3, 0));
     let q13 = q(1, 2, 3).min(q(3, 0, 1));
     if q02 > q13 {
@@ -437,7 +439,7 @@ fn dispatcher_fills_a_large_hole_with_the_front() {
     policy.dispatch.large = vec![Method::AdvancingFront, Method::MinAreaFair];
     let hole = Hole::new(0, &mesh, lp, &policy);
     let mut checker = Checker::new(&mesh);
-    let rep = crate::fill::fill_hole(&mut mesh, &hole, &policy, &mut checker);
+    let rep = crate::fill::dispatch::fill_hole(&mut mesh, &hole, &policy, &mut checker);
     assert_eq!(rep.status, HoleStatus::Filled, "{}", rep.reason);
     assert_eq!(rep.method, Some(Method::AdvancingFront));
     mesh.validate().unwrap();

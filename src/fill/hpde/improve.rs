@@ -1,8 +1,9 @@
 //! Step 7 of HPDE: smoothing, short-edge collapse and angle-improving swaps of the
 //! patch (paper 000 §4.6–§4.7, Fig. 5). Boundary vertices (index `< k`) never move.
 
-use super::super::{FillError, Patch};
-use crate::fill::geom;
+use crate::fill::kit::FillError;
+use crate::geometry::measure;
+use crate::patch::Patch;
 use glam::DVec3;
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -205,12 +206,12 @@ impl Local {
             let c = self.tris[t as usize];
             let [p, q, r] = c.map(|v| self.pos[v as usize]);
             let [p2, q2, r2] = c.map(moved);
-            let n0 = geom::tri_normal_raw(p, q, r);
-            let n1 = geom::tri_normal_raw(p2, q2, r2);
+            let n0 = measure::tri_normal_raw(p, q, r);
+            let n1 = measure::tri_normal_raw(p2, q2, r2);
             if n1.dot(n0) <= 0.25 * n0.length() * n1.length() || n1.length() <= 0.0 {
                 return false;
             }
-            let ang = geom::angles(p2, q2, r2);
+            let ang = measure::angles(p2, q2, r2);
             if ang.iter().copied().fold(f64::INFINITY, f64::min) < 2f64.to_radians() {
                 return false;
             }
@@ -281,10 +282,10 @@ impl Local {
                 if new_min <= old_min + 1e-9 {
                     continue;
                 }
-                let n_old =
-                    geom::tri_normal_raw(p(a), p(b), p(c)) + geom::tri_normal_raw(p(b), p(a), p(d));
-                let n1 = geom::tri_normal_raw(p(a), p(d), p(c));
-                let n2 = geom::tri_normal_raw(p(d), p(b), p(c));
+                let n_old = measure::tri_normal_raw(p(a), p(b), p(c))
+                    + measure::tri_normal_raw(p(b), p(a), p(d));
+                let n1 = measure::tri_normal_raw(p(a), p(d), p(c));
+                let n2 = measure::tri_normal_raw(p(d), p(b), p(c));
                 if n1.dot(n_old) <= 0.0 || n2.dot(n_old) <= 0.0 || n1.dot(n2) <= 0.0 {
                     continue;
                 }
@@ -358,6 +359,6 @@ fn third(t: [u32; 3], a: u32, b: u32) -> Option<u32> {
 }
 
 fn min_angle(a: DVec3, b: DVec3, c: DVec3) -> f64 {
-    let ang = geom::angles(a, b, c);
+    let ang = measure::angles(a, b, c);
     ang[0].min(ang[1]).min(ang[2])
 }

@@ -103,9 +103,10 @@ mod topology;
 #[cfg(test)]
 mod tests;
 
-use super::{FillContext, FillError, Patch};
+use super::kit::{check_patch_size, retry, FillContext, FillError};
 use crate::fasthash::HashMap;
 use crate::mesh::{Mesh, VertexId};
+use crate::patch::Patch;
 use glam::DVec3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -119,12 +120,12 @@ pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
 }
 
 /// [`fill`], with the quality of the checks the patch passed (see
-/// [`super::run_method_checked`]).
+/// [`crate::fill::dispatch::run_method_checked`]).
 pub fn fill_checked(
     ctx: &FillContext,
 ) -> Result<(Patch, Option<crate::report::PatchQuality>), FillError> {
-    super::check_patch_size(ctx)?;
-    super::wavefront::retry::first_passing_at(ctx, &variants(ctx.policy), |_, c| fill_once(c))
+    check_patch_size(ctx)?;
+    retry::first_passing_at(ctx, &variants(ctx.policy), |_, c| fill_once(c))
 }
 
 /// The policy, then without the short-edge collapse (a collapse can pull a vertex across

@@ -1,8 +1,7 @@
 //! Steps 3–5 of HPDE: segmentation test, correspondences, section planes, circular
 //! arcs and the differential-evolution search (paper 000 §4.2–§4.4, §4.8).
 
-use super::super::{FillContext, FillError};
-use crate::fill::Deadline;
+use crate::fill::kit::{Deadline, FillContext, FillError};
 use crate::mesh::{Mesh, VertexId};
 use glam::{DVec2, DVec3};
 use rand::Rng;
@@ -728,7 +727,7 @@ mod tests {
         let y0: Vec<f64> = (0..5).map(|i| -1.0 + 2.0 * (i + 1) as f64 / 6.0).collect();
         let policy = crate::policy::Policy::default();
         let (mesh, _) = crate::mesh::Mesh::from_raw(&crate::io::RawMesh::default());
-        let hole = crate::fill::Hole {
+        let hole = crate::patch::Hole {
             id: 0,
             vertices: vec![],
             perimeter: 0.0,

@@ -3,9 +3,10 @@
 
 use super::*;
 use crate::check::{check_degenerate, check_topology, patch_positions, quality};
-use crate::fill::{apply_patch, Deadline, Hole};
+use crate::fill::kit::Deadline;
 use crate::io::RawMesh;
 use crate::mesh::Mesh;
+use crate::patch::{apply_patch, Hole};
 use crate::policy::{Checks, Policy};
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
@@ -431,7 +432,7 @@ fn expired_deadline_times_out() {
 #[test]
 fn dispatcher_accepts_hpde_patches() {
     use crate::check::Checker;
-    use crate::fill::fill_hole;
+    use crate::fill::dispatch::fill_hole;
     use crate::policy::Method;
     use crate::report::HoleStatus;
     let mut policy = Policy::default();
@@ -561,12 +562,12 @@ fn the_wrapper_keeps_a_passing_patch() {
         .check_patch(&mesh, &hole.vertices, &once, &policy.checks)
         .unwrap();
     let mut relaxed = once.clone();
-    crate::fill::relax::tangential_relax(
+    crate::fill::kit::relax::tangential_relax(
         &mesh,
         &hole,
         &mut relaxed,
         policy.fair.tangential_relax,
-        crate::fill::relax::RELAX_STEP,
+        crate::fill::kit::relax::RELAX_STEP,
     );
     assert_ne!(relaxed, once);
     assert_eq!(fill(&ctx).unwrap(), relaxed);

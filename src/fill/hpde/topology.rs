@@ -1,12 +1,12 @@
 //! Step 6 of HPDE: projection onto the fitted plane (or the two unfolded planes),
 //! constrained Delaunay triangulation with `spade`, lifting (paper 000 §4.5).
 
-use super::super::FillError;
 use super::predict::{fit_plane, Predicted, Segmentation};
 use crate::fasthash::HashMap;
-use crate::fill::geom::newell_normal;
+use crate::fill::kit::FillError;
+use crate::geometry::measure::newell_normal;
+use crate::geometry::predicates::{self, orient2, p2, P2};
 use glam::{DVec2, DVec3};
-use robust::{orient2d, Coord};
 use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
 
 /// Projection of 3D points to the triangulation plane.
@@ -234,34 +234,18 @@ fn signed_area(l: &[DVec2]) -> f64 {
         * 0.5
 }
 
-fn orient(a: DVec2, b: DVec2, c: DVec2) -> f64 {
-    orient2d(
-        Coord { x: a.x, y: a.y },
-        Coord { x: b.x, y: b.y },
-        Coord { x: c.x, y: c.y },
-    )
+/// A plane point as the exact predicates take it.
+fn pt(a: DVec2) -> P2 {
+    p2(a.x, a.y)
 }
 
-/// `c` on the closed segment `ab`, given that the three are collinear.
-fn on_segment(a: DVec2, b: DVec2, c: DVec2) -> bool {
-    c.x >= a.x.min(b.x) && c.x <= a.x.max(b.x) && c.y >= a.y.min(b.y) && c.y <= a.y.max(b.y)
+fn orient(a: DVec2, b: DVec2, c: DVec2) -> f64 {
+    orient2(pt(a), pt(b), pt(c))
 }
 
 /// Closed segments `pq` and `rs` share a point.
 fn segments_meet(p: DVec2, q: DVec2, r: DVec2, s: DVec2) -> bool {
-    let d1 = orient(r, s, p);
-    let d2 = orient(r, s, q);
-    let d3 = orient(p, q, r);
-    let d4 = orient(p, q, s);
-    if ((d1 > 0.0 && d2 < 0.0) || (d1 < 0.0 && d2 > 0.0))
-        && ((d3 > 0.0 && d4 < 0.0) || (d3 < 0.0 && d4 > 0.0))
-    {
-        return true;
-    }
-    (d1 == 0.0 && on_segment(r, s, p))
-        || (d2 == 0.0 && on_segment(r, s, q))
-        || (d3 == 0.0 && on_segment(p, q, r))
-        || (d4 == 0.0 && on_segment(p, q, s))
+    predicates::segments_meet(pt(p), pt(q), pt(r), pt(s))
 }
 
 /// Why a closed polyline is not a simple polygon, or `None`.

@@ -33,8 +33,9 @@
 //! A chord between two loop vertices that is already a mesh edge must not appear in
 //! the patch; each such chord left by the refinement is split at its midpoint.
 
-use super::super::{geom, FillError};
 use crate::fasthash::HashSet;
+use crate::fill::kit::FillError;
+use crate::geometry::measure;
 use glam::DVec3;
 use spade::handles::{FixedFaceHandle, FixedVertexHandle, InnerTag};
 use spade::{
@@ -65,13 +66,13 @@ type Cdt = ConstrainedDelaunayTriangulation<Point2<f64>>;
 /// The projection of the loop on its Newell plane: origin, axes, 2D points, and
 /// whether the loop runs counter-clockwise there (`None`: no plane).
 fn project(pts: &[DVec3]) -> Option<(DVec3, DVec3, DVec3, Vec<Point2<f64>>)> {
-    let n = geom::newell_normal(pts);
+    let n = measure::newell_normal(pts);
     if n == DVec3::ZERO {
         return None;
     }
     let u = n.any_orthonormal_vector();
     let v = n.cross(u);
-    let c = geom::centroid(pts);
+    let c = measure::centroid(pts);
     let p2: Vec<Point2<f64>> = pts
         .iter()
         .map(|&p| Point2::new((p - c).dot(u), (p - c).dot(v)))
@@ -401,12 +402,12 @@ mod tests {
             assert!(n.z > 0.0, "{t:?} is flipped");
             total += 0.5 * n.length();
             worst = worst.min(
-                geom::angles(a, b, c)
+                measure::angles(a, b, c)
                     .into_iter()
                     .fold(f64::INFINITY, f64::min),
             );
         }
-        let polygon = geom::vector_area(&pts);
+        let polygon = measure::vector_area(&pts);
         assert!(
             (total - polygon).abs() < 1e-9 * polygon,
             "{total} vs {polygon}"
@@ -521,7 +522,7 @@ mod tests {
                 DVec3::new(s * t.sin(), s * (2.0 * t).sin() / 2.0, 0.0)
             })
             .collect();
-        assert!(geom::newell_normal(&eight).z.abs() > 0.99);
+        assert!(measure::newell_normal(&eight).z.abs() > 0.99);
         assert!(graded(&eight, &HashSet::default(), params(0.01))
             .unwrap()
             .is_none());

@@ -7,7 +7,7 @@
 //! 2. [`refine`]: triangles are split at their centroids until they match the density
 //!    of the surrounding mesh (`refine.density`, paper: sqrt 2), with Delaunay edge
 //!    swaps after each round.
-//! 3. [`crate::fill::fair`]: the new vertices solve `Δ^c x = 0` (`fair.continuity`,
+//! 3. [`crate::fill::kit::fair`]: the new vertices solve `Δ^c x = 0` (`fair.continuity`,
 //!    `fair.weights`) with the loop and enough outer rings of the mesh fixed.
 //!
 //! Beyond the paper (for the quality target `Qt > 1.39` on most patch triangles, which
@@ -37,50 +37,14 @@
 //! "until no new triangles created", which we follow (as Liepa and CGAL do).
 
 pub mod graded;
-pub mod refine;
-pub mod triangulate;
 
-use super::{fair, FillContext, FillError, Patch};
-use crate::fasthash::{HashMap, HashSet};
+use super::kit::triangulate::{forbidden_chords, outside_normals};
+use super::kit::{fair, refine, triangulate, FillContext, FillError};
+use crate::fasthash::HashSet;
+use crate::geometry::measure;
 use crate::mesh::{Mesh, VertexId};
+use crate::patch::Patch;
 use glam::DVec3;
-
-/// Loop chords `(a, b)`, `a < b`, that are existing mesh edges (loop edges excluded).
-pub fn forbidden_chords(mesh: &Mesh, lp: &[VertexId]) -> HashSet<(u32, u32)> {
-    let k = lp.len();
-    let index: HashMap<VertexId, u32> =
-        lp.iter().enumerate().map(|(i, &v)| (v, i as u32)).collect();
-    let mut out = HashSet::default();
-    for (i, &v) in lp.iter().enumerate() {
-        for w in mesh.topo.neighbors(v) {
-            if let Some(&j) = index.get(&w) {
-                let i = i as u32;
-                let adjacent =
-                    (i as usize + 1) % k == j as usize || (j as usize + 1) % k == i as usize;
-                if !adjacent && i != j {
-                    out.insert((i.min(j), i.max(j)));
-                }
-            }
-        }
-    }
-    out
-}
-
-/// Unit normal of the mesh face outside each loop edge `v[i] -> v[i+1]` (the face
-/// holding the half-edge `v[i+1] -> v[i]`).
-pub fn outside_normals(mesh: &Mesh, lp: &[VertexId]) -> Vec<Option<DVec3>> {
-    let k = lp.len();
-    (0..k)
-        .map(|i| {
-            let (a, b) = (lp[i], lp[(i + 1) % k]);
-            mesh.topo
-                .outgoing(b)
-                .find(|&h| mesh.topo.to(h) == a)
-                .map(|h| mesh.face_normal_raw(h.face()).normalize_or_zero())
-                .filter(|n| *n != DVec3::ZERO)
-        })
-        .collect()
-}
 
 /// Scale of each loop vertex: mean length of its mesh edges that are not hole-boundary
 /// edges (the loop's mean edge length when it has none).
@@ -139,7 +103,7 @@ pub fn coarse_scale(
 ) -> Option<f64> {
     let area: f64 = tris
         .iter()
-        .map(|t| super::geom::tri_area(pts[t[0] as usize], pts[t[1] as usize], pts[t[2] as usize]))
+        .map(|t| measure::tri_area(pts[t[0] as usize], pts[t[1] as usize], pts[t[2] as usize]))
         .sum();
     coarse_scale_for_area(area, scale, density, cap)
 }
@@ -183,7 +147,7 @@ fn fill_graded(
 ) -> Result<Option<Patch>, FillError> {
     let k = pts.len();
     let cap = ctx.policy.limits.max_patch_triangles;
-    let area = super::geom::vector_area(pts);
+    let area = measure::vector_area(pts);
     if coarse_scale_for_area(area, scale, ctx.policy.refine.density, cap).is_none() {
         return Ok(None);
     }
@@ -242,7 +206,7 @@ fn fill_graded(
             .iter()
             .map(|t| {
                 let [a, b, c] = t.map(|i| r.pos[i as usize]);
-                refine::min_angle(a, b, c)
+                measure::smallest_angle_by_cosines(a, b, c)
             })
             .fold(f64::INFINITY, f64::min);
         if worst < limit {

@@ -2,8 +2,9 @@
 
 use super::*;
 use crate::check::{check_degenerate, check_topology, patch_positions, quality};
-use crate::fill::{apply_patch, Deadline, Hole};
+use crate::fill::kit::Deadline;
 use crate::io::RawMesh;
+use crate::patch::{apply_patch, Hole};
 use crate::policy::{Policy, TriangulationWeight, Weights};
 use proptest::prelude::*;
 
@@ -467,7 +468,11 @@ fn huge_planar_hole_gets_a_graded_planar_patch() {
         .triangles
         .iter()
         .map(|t| {
-            crate::fill::geom::tri_area(pos[t[0] as usize], pos[t[1] as usize], pos[t[2] as usize])
+            crate::geometry::measure::tri_area(
+                pos[t[0] as usize],
+                pos[t[1] as usize],
+                pos[t[2] as usize],
+            )
         })
         .fold(0.0f64, f64::max);
     assert!(largest > 4.0, "largest triangle {largest}");

@@ -17,7 +17,7 @@
 //! * Weights (`policy.fair.weights`): cotangent `(cot α + cot β)/2` computed on the
 //!   patch as it stands before fairing (the refined, flat triangulation; the patch
 //!   refinement makes it Delaunay, so the weights are non-negative there). Each
-//!   cotangent is clamped (see [`geom::cot_at`]) and a negative edge weight is set to
+//!   cotangent is clamped (see [`measure::cot_at`]) and a negative edge weight is set to
 //!   zero; a vertex with a degenerate incident triangle or no positive weight falls
 //!   back to uniform weights. `fujiwara` is the scale-dependent umbrella, weight
 //!   `1/|e|`; `uniform` is weight 1.
@@ -38,9 +38,11 @@
 //! symmetric and sparse LU is used instead (also when Cholesky fails). A failed
 //! factorisation or a non-finite result is `FillError::Failed`.
 
-use super::{geom, FillError, Hole, Patch};
+use super::FillError;
 use crate::fasthash::HashMap;
+use crate::geometry::measure;
 use crate::mesh::{Mesh, VertexId};
+use crate::patch::{Hole, Patch};
 use crate::policy::{Fair, Weights};
 use faer::linalg::solvers::Solve;
 use faer::Mat;
@@ -98,14 +100,14 @@ fn build_operator(local: &LocalMesh, weights: Weights, norm: Normalization) -> O
     for t in &local.triangles {
         let [a, b, c] = t.map(|i| p[i as usize]);
         let l = (b - a).length().max((c - b).length()).max((a - c).length());
-        let ar = geom::tri_area(a, b, c);
+        let ar = measure::tri_area(a, b, c);
         if !ar.is_finite() || ar <= 1e-12 * l * l {
             for &i in t {
                 degenerate[i as usize] = true;
             }
         }
         // mixed Voronoi area (Meyer et al. 2003)
-        let ang = geom::angles(a, b, c);
+        let ang = measure::angles(a, b, c);
         let obtuse = ang.iter().position(|&x| x > std::f64::consts::FRAC_PI_2);
         for corner in 0..3 {
             let i = t[corner] as usize;
@@ -113,8 +115,8 @@ fn build_operator(local: &LocalMesh, weights: Weights, norm: Normalization) -> O
             let k = t[(corner + 2) % 3] as usize;
             let contrib = match obtuse {
                 None => {
-                    let cj = geom::cot_at(p[j], p[k], p[i]);
-                    let ck = geom::cot_at(p[k], p[i], p[j]);
+                    let cj = measure::cot_at(p[j], p[k], p[i]);
+                    let ck = measure::cot_at(p[k], p[i], p[j]);
                     ((p[i] - p[k]).length_squared() * cj + (p[i] - p[j]).length_squared() * ck)
                         / 8.0
                 }
@@ -130,7 +132,7 @@ fn build_operator(local: &LocalMesh, weights: Weights, norm: Normalization) -> O
             let key = (i.min(j), i.max(j));
             cot.push((
                 key,
-                geom::cot_at(p[k as usize], p[i as usize], p[j as usize]),
+                measure::cot_at(p[k as usize], p[i as usize], p[j as usize]),
             ));
         }
     }

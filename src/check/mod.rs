@@ -8,7 +8,7 @@
 //! ([`crate::bvh`]) over them, plus a logarithmic set of small trees over the faces
 //! committed since and a linear scan of a short tail of them (see [`Checker`]); the
 //! narrow phase is an exact triangle-triangle test on `robust::orient3d`/`orient2d`
-//! signs ([`tri_tri`]). Repairs that change a few triangles of a patch at a time
+//! signs ([`crate::geometry::predicates::tri_tri`]). Repairs that change a few triangles of a patch at a time
 //! (edge flips, re-triangulating a region) use [`PatchChecks`], which records every
 //! failure once and re-tests only what a change touches, with the same result.
 //!
@@ -28,29 +28,21 @@
 //!   may assume them non-degenerate; a zero-area face of the mesh is handled exactly
 //!   (as the union of its edges).
 
-use crate::bvh::{boxes_meet, f32_down, f32_up, tri_box, Bvh};
-use crate::fill::geom;
-use crate::fill::Patch;
+use crate::geometry::bvh::{boxes_meet, f32_down, f32_up, tri_box, Bvh};
+use crate::geometry::measure;
+use crate::geometry::predicates::{tri_axis, tri_tri_axes};
 use crate::mesh::{Mesh, VertexId};
+use crate::patch::Patch;
 use crate::policy::Checks;
 use crate::report::PatchQuality;
 use glam::DVec3;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::OnceLock;
 
+mod failure;
 mod incremental;
+pub use failure::{CheckFailure, Degeneracy, Meets, TopologyFailure};
 pub use incremental::{Change, PatchChecks};
-
-/// Why a patch was rejected.
-#[derive(Clone, Debug, PartialEq, thiserror::Error)]
-pub enum CheckFailure {
-    #[error("patch triangle {0} is degenerate ({1})")]
-    Degenerate(usize, String),
-    #[error("patch is not a disk closing the hole: {0}")]
-    Topology(String),
-    #[error("patch triangle {0} intersects {1}")]
-    SelfIntersection(usize, String),
-}
 
 /// Holds what the checks need across holes. For the faces the mesh had at
 /// construction: their boxes (`f32`, see [`FaceBox`]), scanned linearly for the faces
@@ -352,8 +344,8 @@ impl Checker {
         near: Option<&[u32]>,
     ) -> Result<PatchQuality, CheckFailure> {
         if let Some(v) = hole.iter().find(|v| v.idx() >= mesh.num_vertices()) {
-            return Err(CheckFailure::Topology(format!(
-                "hole vertex {v} is not in the mesh"
+            return Err(CheckFailure::Topology(TopologyFailure::HoleVertexMissing(
+                *v,
             )));
         }
         check_topology(mesh, hole, patch)?;
@@ -465,7 +457,7 @@ impl Checker {
         out
     }
 
-    /// The self-intersection check (see [`tri_tri`] for the rules on shared vertices).
+    /// The self-intersection check (see [`crate::geometry::predicates::tri_tri`] for the rules on shared vertices).
     /// The failure reported is the smallest failing patch triangle `i`: first against
     /// the other patch triangles (with `against_base`; the smallest other one it meets),
     /// then against the mesh faces (the smallest face it meets).
@@ -527,10 +519,10 @@ impl Checker {
                 }
             });
             if let Some((i, j)) = hit {
-                return Err(CheckFailure::SelfIntersection(
-                    i,
-                    format!("patch triangle {j}"),
-                ));
+                return Err(CheckFailure::SelfIntersection {
+                    triangle: i,
+                    meets: Meets::PatchTriangle(j),
+                });
             }
         }
         // patch against mesh: each nearby face against the patch triangles near it;
@@ -559,7 +551,10 @@ impl Checker {
             });
         }
         match hit {
-            Some((i, f)) => Err(CheckFailure::SelfIntersection(i, format!("mesh face {f}"))),
+            Some((i, f)) => Err(CheckFailure::SelfIntersection {
+                triangle: i,
+                meets: Meets::MeshFace(f as usize),
+            }),
             None => Ok(()),
         }
     }
@@ -615,285 +610,6 @@ fn face_box(mesh: &Mesh, f: usize) -> (DVec3, DVec3) {
     }
 }
 
-// ---------------------------------------------------------------------------
-// Exact triangle-triangle intersection.
-//
-// Every predicate is a sign of `robust::orient3d` / `robust::orient2d` (Shewchuk's
-// adaptive exact predicates), so the answers are exact for the f64 coordinates.
-// The test is the edge form of the classic one: two closed triangles meet iff an
-// edge of one meets the other (their intersection, if not empty, is a convex set
-// whose extreme points lie on the boundary of one of them), which also covers
-// degenerate (collinear) triangles, whose point set is the union of their edges.
-
-type P3 = DVec3;
-
-#[inline]
-fn o3(a: P3, b: P3, c: P3, d: P3) -> f64 {
-    let k = |p: P3| robust::Coord3D {
-        x: p.x,
-        y: p.y,
-        z: p.z,
-    };
-    robust::orient3d(k(a), k(b), k(c), k(d))
-}
-
-/// A point projected by dropping coordinate `drop`.
-#[inline]
-fn pr(p: P3, drop: usize) -> robust::Coord<f64> {
-    match drop {
-        0 => robust::Coord { x: p.y, y: p.z },
-        1 => robust::Coord { x: p.z, y: p.x },
-        _ => robust::Coord { x: p.x, y: p.y },
-    }
-}
-
-#[inline]
-fn o2(a: P3, b: P3, c: P3, drop: usize) -> f64 {
-    robust::orient2d(pr(a, drop), pr(b, drop), pr(c, drop))
-}
-
-/// A coordinate to drop so that the triangle's projection is not degenerate (the
-/// projection is then a bijection of the triangle's plane), `None` for a degenerate
-/// (collinear) triangle. The best-conditioned axis is tried first.
-fn proj_axis(a: P3, b: P3, c: P3) -> Option<usize> {
-    let n = (b - a).cross(c - a).abs();
-    let first = if n.x >= n.y && n.x >= n.z {
-        0
-    } else if n.y >= n.z {
-        1
-    } else {
-        2
-    };
-    [first, (first + 1) % 3, (first + 2) % 3]
-        .into_iter()
-        .find(|&d| o2(a, b, c, d) != 0.0)
-}
-
-/// `p` lies in the closed box of `a`, `b` (used for collinear points only).
-fn in_span(a: P3, b: P3, p: P3) -> bool {
-    (0..3).all(|i| a[i].min(b[i]) <= p[i] && p[i] <= a[i].max(b[i]))
-}
-
-/// Closed segments `ab` and `cd` meet; all four points coplanar, projected by `drop`.
-fn seg_seg2(a: P3, b: P3, c: P3, d: P3, drop: usize) -> bool {
-    let d1 = o2(c, d, a, drop);
-    let d2 = o2(c, d, b, drop);
-    let d3 = o2(a, b, c, drop);
-    let d4 = o2(a, b, d, drop);
-    if ((d1 > 0.0 && d2 < 0.0) || (d1 < 0.0 && d2 > 0.0))
-        && ((d3 > 0.0 && d4 < 0.0) || (d3 < 0.0 && d4 > 0.0))
-    {
-        return true;
-    }
-    (d1 == 0.0 && in_span(c, d, a))
-        || (d2 == 0.0 && in_span(c, d, b))
-        || (d3 == 0.0 && in_span(a, b, c))
-        || (d4 == 0.0 && in_span(a, b, d))
-}
-
-/// `p` lies in the closed triangle `t` (coplanar, non-degenerate in projection `drop`).
-fn in_tri2(p: P3, t: &[P3; 3], drop: usize) -> bool {
-    let s = [
-        o2(t[0], t[1], p, drop),
-        o2(t[1], t[2], p, drop),
-        o2(t[2], t[0], p, drop),
-    ];
-    !(s.iter().any(|&x| x > 0.0) && s.iter().any(|&x| x < 0.0))
-}
-
-/// Closed segment `st` meets the closed non-degenerate triangle `t`.
-fn seg_tri(s: P3, e: P3, t: &[P3; 3]) -> bool {
-    seg_tri_sided(s, e, t).unwrap_or(false)
-}
-
-/// [`seg_tri`], or `None` when the segment lies strictly on one side of the
-/// triangle's plane (so it does not meet it).
-fn seg_tri_sided(s: P3, e: P3, t: &[P3; 3]) -> Option<bool> {
-    let [a, b, c] = *t;
-    let os = o3(a, b, c, s);
-    let oe = o3(a, b, c, e);
-    if (os > 0.0 && oe > 0.0) || (os < 0.0 && oe < 0.0) {
-        return None;
-    }
-    Some(seg_tri_across(s, e, t, os, oe))
-}
-
-/// The rest of [`seg_tri`], with the sides `os`, `oe` of the ends not both strict
-/// and equal.
-fn seg_tri_across(s: P3, e: P3, t: &[P3; 3], os: f64, oe: f64) -> bool {
-    let [a, b, c] = *t;
-    if os == 0.0 && oe == 0.0 {
-        let Some(drop) = proj_axis(a, b, c) else {
-            return false;
-        };
-        return in_tri2(s, t, drop)
-            || in_tri2(e, t, drop)
-            || seg_seg2(s, e, a, b, drop)
-            || seg_seg2(s, e, b, c, drop)
-            || seg_seg2(s, e, c, a, drop);
-    }
-    // the segment crosses (or touches) the plane at one point: it lies in the
-    // triangle iff the line se passes on the same side of all three edges
-    let v = [o3(s, e, a, b), o3(s, e, b, c), o3(s, e, c, a)];
-    !(v.iter().any(|&x| x > 0.0) && v.iter().any(|&x| x < 0.0))
-}
-
-/// Closed segments `ab` and `cd` in space meet.
-fn seg_seg3(a: P3, b: P3, c: P3, d: P3) -> bool {
-    if o3(a, b, c, d) != 0.0 {
-        return false;
-    }
-    for (x, y, z) in [(a, b, c), (a, b, d), (a, c, d), (b, c, d)] {
-        if let Some(drop) = proj_axis(x, y, z) {
-            return seg_seg2(a, b, c, d, drop);
-        }
-    }
-    // all four points on one line: compare along the axis where they spread most
-    let lo = a.min(b).min(c).min(d);
-    let hi = a.max(b).max(c).max(d);
-    let ext = hi - lo;
-    let i = if ext.x >= ext.y && ext.x >= ext.z {
-        0
-    } else if ext.y >= ext.z {
-        1
-    } else {
-        2
-    };
-    a[i].min(b[i]) <= c[i].max(d[i]) && c[i].min(d[i]) <= a[i].max(b[i])
-}
-
-/// Closed triangles `p` and `q` (no shared vertices) meet.
-pub fn tri_tri_plain(p: &[P3; 3], q: &[P3; 3]) -> bool {
-    tri_tri_plain_axes(p, tri_axis(p), q, tri_axis(q))
-}
-
-/// The projection axis of a triangle ([`proj_axis`]), to pass to [`tri_tri_axes`].
-pub fn tri_axis(t: &[P3; 3]) -> Option<usize> {
-    proj_axis(t[0], t[1], t[2])
-}
-
-/// [`tri_tri_plain`] with the triangles' [`tri_axis`] given.
-fn tri_tri_plain_axes(p: &[P3; 3], pa: Option<usize>, q: &[P3; 3], qa: Option<usize>) -> bool {
-    let edges = |t: &[P3; 3]| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])];
-    match (pa, qa) {
-        (Some(_), Some(_)) => {
-            // early out: all of one triangle strictly on one side of the other's plane
-            let side = |t: &[P3; 3], u: &[P3; 3]| {
-                let s = u.map(|x| o3(t[0], t[1], t[2], x));
-                s.iter().all(|&x| x > 0.0) || s.iter().all(|&x| x < 0.0)
-            };
-            if side(p, q) || side(q, p) {
-                return false;
-            }
-            edges(p).iter().any(|&(s, e)| seg_tri(s, e, q))
-                || edges(q).iter().any(|&(s, e)| seg_tri(s, e, p))
-        }
-        (Some(_), None) => edges(q).iter().any(|&(s, e)| seg_tri(s, e, p)),
-        (None, Some(_)) => edges(p).iter().any(|&(s, e)| seg_tri(s, e, q)),
-        (None, None) => edges(p)
-            .iter()
-            .any(|&(a, b)| edges(q).iter().any(|&(c, d)| seg_seg3(a, b, c, d))),
-    }
-}
-
-/// Triangle `p` (keys `pk`) and triangle `q` (keys `qk`) intersect, under CGAL's
-/// convention for triangles sharing vertices (equal keys = the same vertex):
-/// - no shared vertex: the closed triangles meet;
-/// - one shared vertex `w`: they meet somewhere other than `w` (iff the edge of one
-///   opposite `w` meets the other triangle);
-/// - two shared vertices (a shared edge): they overlap beyond the edge, which for
-///   non-degenerate triangles means coplanar with both far vertices strictly on the
-///   same side of the edge (a fold);
-/// - three: the same triangle, always an intersection.
-///
-/// `p` must be non-degenerate (patch triangles are checked for that first); a
-/// degenerate `p` is reported as intersecting whenever it shares a vertex.
-/// `q` may be degenerate (a zero-area face of the input).
-pub fn tri_tri(p: &[P3; 3], pk: &[u64; 3], q: &[P3; 3], qk: &[u64; 3]) -> bool {
-    tri_tri_axes(p, pk, tri_axis(p), q, qk, tri_axis(q))
-}
-
-/// [`tri_tri`] with the triangles' [`tri_axis`] given (computed once per triangle by a
-/// caller that tests it against many).
-pub fn tri_tri_axes(
-    p: &[P3; 3],
-    pk: &[u64; 3],
-    pa: Option<usize>,
-    q: &[P3; 3],
-    qk: &[u64; 3],
-    qa: Option<usize>,
-) -> bool {
-    // the shared corners, without allocating (called for every candidate pair)
-    let mut shared = [(0usize, 0usize); 9];
-    let mut count = 0;
-    for (i, a) in pk.iter().enumerate() {
-        for (j, b) in qk.iter().enumerate() {
-            if a == b {
-                shared[count] = (i, j);
-                count += 1;
-            }
-        }
-    }
-    match count {
-        0 => tri_tri_plain_axes(p, pa, q, qa),
-        1 => {
-            let (i, j) = shared[0];
-            let w = p[i];
-            let (p1, p2) = (p[(i + 1) % 3], p[(i + 2) % 3]);
-            let (q1, q2) = (q[(j + 1) % 3], q[(j + 2) % 3]);
-            if pa.is_none() {
-                return true;
-            }
-            if qa.is_some() {
-                // p1 and p2 strictly on one side of q's plane (w is on it): p meets
-                // that plane, so q, at w only
-                return match seg_tri_sided(p1, p2, q) {
-                    None => false,
-                    Some(hit) => hit || seg_tri(q1, q2, p),
-                };
-            }
-            // q is a segment through w: it meets p beyond w iff one of its two
-            // pieces from w runs into p
-            [q1, q2]
-                .into_iter()
-                .any(|x| x != w && ray_enters(w, x, p1, p2))
-        }
-        2 => {
-            let (i0, j0) = shared[0];
-            let (i1, j1) = shared[1];
-            let (u, v) = (p[i0], p[i1]);
-            let pf = p[3 - i0 - i1];
-            let qf = q[3 - j0 - j1];
-            let Some(drop) = pa else {
-                return true;
-            };
-            if o3(u, v, pf, qf) != 0.0 {
-                return false;
-            }
-            let a = o2(u, v, pf, drop);
-            let b = o2(u, v, qf, drop);
-            (a > 0.0 && b > 0.0) || (a < 0.0 && b < 0.0)
-        }
-        _ => true,
-    }
-}
-
-/// The segment from `w` (a corner of the non-degenerate triangle `w p1 p2`) to `x`
-/// meets the triangle at a point other than `w`.
-fn ray_enters(w: P3, x: P3, p1: P3, p2: P3) -> bool {
-    if o3(w, p1, p2, x) != 0.0 {
-        return false; // crosses the plane at w only
-    }
-    let Some(drop) = proj_axis(w, p1, p2) else {
-        return true;
-    };
-    // direction x - w inside the closed angle p1 w p2
-    let turn = o2(w, p1, p2, drop).signum();
-    let a = o2(w, p1, x, drop) * turn;
-    let b = o2(w, x, p2, drop) * turn;
-    a >= 0.0 && b >= 0.0
-}
-
 /// Positions of every patch vertex (loop first, then new).
 pub fn patch_positions(mesh: &Mesh, hole: &[VertexId], patch: &Patch) -> Vec<DVec3> {
     hole.iter()
@@ -906,19 +622,19 @@ pub fn patch_positions(mesh: &Mesh, hole: &[VertexId], patch: &Patch) -> Vec<DVe
 pub fn check_topology(mesh: &Mesh, hole: &[VertexId], patch: &Patch) -> Result<(), CheckFailure> {
     let k = hole.len();
     let n = k + patch.new_vertices.len();
-    let err = |m: String| Err(CheckFailure::Topology(m));
+    let err = |m: TopologyFailure| Err(CheckFailure::Topology(m));
     if patch.triangles.is_empty() {
-        return err("no triangles".into());
+        return err(TopologyFailure::NoTriangles);
     }
     if let Some(p) = patch.new_vertices.iter().position(|p| !p.is_finite()) {
-        return err(format!("new vertex {p} has a non-finite coordinate"));
+        return err(TopologyFailure::NonFinite(p));
     }
     for (ti, t) in patch.triangles.iter().enumerate() {
         if t.iter().any(|&i| i as usize >= n) {
-            return err(format!("triangle {ti} has an index out of range"));
+            return err(TopologyFailure::IndexOutOfRange(ti));
         }
         if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
-            return err(format!("triangle {ti} repeats a vertex"));
+            return err(TopologyFailure::RepeatedVertex(ti));
         }
     }
     // the corners of each vertex, as wedges (next, previous) in its triangles, one
@@ -949,10 +665,7 @@ pub fn check_topology(mesh: &Mesh, hole: &[VertexId], patch: &Patch) -> Result<(
     let has_edge = |a: u32, b: u32| out(a).binary_search_by_key(&b, |w| w.0).is_ok();
     for v in 0..n as u32 {
         if let Some(w) = out(v).windows(2).find(|w| w[0].0 == w[1].0) {
-            return err(format!(
-                "edge {v}-{} is used twice in one direction",
-                w[0].0
-            ));
+            return err(TopologyFailure::EdgeUsedTwice(v, w[0].0));
         }
     }
     let is_loop_edge =
@@ -965,12 +678,10 @@ pub fn check_topology(mesh: &Mesh, hole: &[VertexId], patch: &Patch) -> Result<(
                 continue;
             }
             if is_loop_edge(b, a) {
-                return err(format!(
-                    "boundary edge {b}-{a} is covered with the wrong orientation"
-                ));
+                return err(TopologyFailure::BoundaryReversed(b, a));
             }
             if !has_edge(b, a) {
-                return err(format!("edge {a}-{b} is left open"));
+                return err(TopologyFailure::OpenEdge(a, b));
             }
             if a < b {
                 edges += 1;
@@ -979,23 +690,23 @@ pub fn check_topology(mesh: &Mesh, hole: &[VertexId], patch: &Patch) -> Result<(
             if (a as usize) < k && (b as usize) < k && a < b {
                 let (va, vb) = (hole[a as usize], hole[b as usize]);
                 if mesh.topo.neighbors(va).contains(&vb) {
-                    return err(format!("chord {a}-{b} duplicates an existing mesh edge"));
+                    return err(TopologyFailure::ChordIsMeshEdge(a, b));
                 }
             }
         }
     }
     for i in 0..k {
         if !has_edge(i as u32, ((i + 1) % k) as u32) {
-            return err(format!("boundary edge {i}-{} is not covered", (i + 1) % k));
+            return err(TopologyFailure::BoundaryUncovered(i, (i + 1) % k));
         }
     }
     // Euler characteristic of a disk: V - E + F = 1
     if let Some(i) = (0..n).find(|&i| start[i] == start[i + 1]) {
-        return err(format!("vertex {i} is not used by any triangle"));
+        return err(TopologyFailure::UnusedVertex(i));
     }
     let chi = n as i64 - edges as i64 + patch.triangles.len() as i64;
     if chi != 1 {
-        return err(format!("patch is not a disk (Euler characteristic {chi})"));
+        return err(TopologyFailure::NotADisk(chi));
     }
     // connected: otherwise a disk plus a closed torus of new vertices has chi = 1 too
     let mut parent: Vec<usize> = (0..n).collect();
@@ -1017,7 +728,7 @@ pub fn check_topology(mesh: &Mesh, hole: &[VertexId], patch: &Patch) -> Result<(
     }
     let r0 = root(&mut parent, 0);
     if let Some(i) = (1..n).find(|&i| root(&mut parent, i) != r0) {
-        return err(format!("vertex {i} is not connected to the hole's loop"));
+        return err(TopologyFailure::Disconnected(i));
     }
     // every vertex must have a single fan (no pinched vertex inside the patch): follow
     // wedge (a, b) to the wedge starting at b (its `next` is unique, checked above)
@@ -1044,7 +755,7 @@ pub fn check_topology(mesh: &Mesh, hole: &[VertexId], patch: &Patch) -> Result<(
             }
         }
         if steps != wedges.len() {
-            return err(format!("vertex {v} has more than one fan"));
+            return err(TopologyFailure::Pinched(v));
         }
     }
     Ok(())
@@ -1056,7 +767,7 @@ pub fn check_degenerate(pos: &[DVec3], patch: &Patch, opts: &Checks) -> Result<(
     for (ti, t) in patch.triangles.iter().enumerate() {
         let [a, b, c] = t.map(|i| pos[i as usize]);
         if let Some(why) = degenerate_reason(a, b, c, min_angle) {
-            return Err(CheckFailure::Degenerate(ti, why));
+            return Err(CheckFailure::Degenerate { triangle: ti, why });
         }
     }
     Ok(())
@@ -1064,15 +775,15 @@ pub fn check_degenerate(pos: &[DVec3], patch: &Patch, opts: &Checks) -> Result<(
 
 /// Why triangle `abc` is degenerate (zero area, or an angle below `min_angle`
 /// radians), `None` when it is not.
-fn degenerate_reason(a: DVec3, b: DVec3, c: DVec3, min_angle: f64) -> Option<String> {
+fn degenerate_reason(a: DVec3, b: DVec3, c: DVec3, min_angle: f64) -> Option<Degeneracy> {
     let l = (b - a).length().max((c - b).length()).max((a - c).length());
-    let area = geom::tri_area(a, b, c);
+    let area = measure::tri_area(a, b, c);
     if area.is_nan() || area <= 1e-12 * l * l {
-        return Some(format!("area {area:e}"));
+        return Some(Degeneracy::Area(area));
     }
-    let m = geom::smallest_angle(a, b, c);
+    let m = measure::smallest_angle(a, b, c);
     if m < min_angle {
-        return Some(format!("smallest angle {:.3} deg", m.to_degrees()));
+        return Some(Degeneracy::SmallAngle(m.to_degrees()));
     }
     None
 }
@@ -1083,10 +794,10 @@ pub fn quality(pos: &[DVec3], k: usize, patch: &Patch) -> PatchQuality {
     let mut min_angle = f64::INFINITY;
     for t in &patch.triangles {
         let [a, b, c] = t.map(|i| pos[i as usize]);
-        if geom::quality(a, b, c) > 1.39 {
+        if measure::quality(a, b, c) > 1.39 {
             good += 1;
         }
-        min_angle = min_angle.min(geom::smallest_angle(a, b, c));
+        min_angle = min_angle.min(measure::smallest_angle(a, b, c));
     }
     let nnew = patch.new_vertices.len();
     let valence6_share = if nnew == 0 {
@@ -1148,268 +859,11 @@ pub fn quality(pos: &[DVec3], k: usize, patch: &Patch) -> PatchQuality {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::predicates::tri_tri;
     use crate::io::RawMesh;
-    use proptest::prelude::*;
 
     fn v(x: f64, y: f64, z: f64) -> DVec3 {
         DVec3::new(x, y, z)
-    }
-
-    const NONE: [u64; 3] = [10, 11, 12];
-    const OTHER: [u64; 3] = [20, 21, 22];
-
-    fn plain(p: [DVec3; 3], q: [DVec3; 3]) -> bool {
-        tri_tri(&p, &NONE, &q, &OTHER)
-    }
-
-    #[test]
-    fn disjoint_and_crossing() {
-        let p = [v(0., 0., 0.), v(1., 0., 0.), v(0., 1., 0.)];
-        assert!(!plain(p, [v(0., 0., 1.), v(1., 0., 1.), v(0., 1., 1.)]));
-        // q's plane cuts p's plane but q's segment there misses p
-        assert!(!plain(p, [v(2., 2., -1.), v(3., 2., 1.), v(2., 3., 1.)]));
-        // q pierces p
-        assert!(plain(
-            p,
-            [v(0.2, 0.2, -1.), v(0.3, 0.2, 1.), v(0.2, 0.3, 1.)]
-        ));
-        // q straddles p's edge: a bar through the middle
-        assert!(plain(
-            p,
-            [v(-1., 0.3, -0.5), v(2., 0.3, -0.5), v(0.1, 0.3, 0.5)]
-        ));
-    }
-
-    #[test]
-    fn touching_counts_unless_shared() {
-        let p = [v(0., 0., 0.), v(1., 0., 0.), v(0., 1., 0.)];
-        // q's corner touches the middle of p's edge from above: a real contact
-        let q = [v(0.5, 0.0, 0.0), v(0.5, -1.0, 1.0), v(0.6, -1.0, 1.0)];
-        assert!(plain(p, q));
-        // the same corner coordinates, but a shared vertex, touch only there
-        let q = [v(0., 0., 0.), v(-1., -1., 1.), v(-1., 0., 1.)];
-        assert!(plain(p, q)); // not shared: touching at a point is an intersection
-        assert!(!tri_tri(&p, &[1, 2, 3], &q, &[1, 5, 6]));
-        // shared vertex, but q's far edge passes through p
-        let q = [v(0., 0., 0.), v(0.3, 0.3, -1.), v(0.3, 0.3, 1.)];
-        assert!(tri_tri(&p, &[1, 2, 3], &q, &[1, 5, 6]));
-        // shared vertex, coplanar, q inside p's angle
-        let q = [v(0., 0., 0.), v(0.2, 0.1, 0.), v(0.1, 0.2, 0.)];
-        assert!(tri_tri(&p, &[1, 2, 3], &q, &[1, 5, 6]));
-        // shared vertex, coplanar, q outside p's angle
-        let q = [v(0., 0., 0.), v(-0.2, -0.1, 0.), v(-0.1, -0.2, 0.)];
-        assert!(!tri_tri(&p, &[1, 2, 3], &q, &[1, 5, 6]));
-        // shared vertex, coplanar, q's edge runs along p's edge
-        let q = [v(0., 0., 0.), v(0.5, 0., 0.), v(0.5, -1., 0.)];
-        assert!(tri_tri(&p, &[1, 2, 3], &q, &[1, 5, 6]));
-    }
-
-    #[test]
-    fn shared_edge_rules() {
-        let p = [v(0., 0., 0.), v(1., 0., 0.), v(0.5, 1., 0.)];
-        let pk = [1, 2, 3];
-        let qk = [2, 1, 9];
-        // flat continuation on the other side: no intersection
-        assert!(!tri_tri(
-            &p,
-            &pk,
-            &[v(1., 0., 0.), v(0., 0., 0.), v(0.5, -1., 0.)],
-            &qk
-        ));
-        // hinge (not coplanar): only the edge is shared
-        assert!(!tri_tri(
-            &p,
-            &pk,
-            &[v(1., 0., 0.), v(0., 0., 0.), v(0.5, 0.5, 1.)],
-            &qk
-        ));
-        // coplanar fold onto p: overlap beyond the edge
-        assert!(tri_tri(
-            &p,
-            &pk,
-            &[v(1., 0., 0.), v(0., 0., 0.), v(0.2, 0.3, 0.)],
-            &qk
-        ));
-        // fold by a hair off the plane: exact, so no intersection
-        assert!(!tri_tri(
-            &p,
-            &pk,
-            &[v(1., 0., 0.), v(0., 0., 0.), v(0.2, 0.3, 1e-300)],
-            &qk
-        ));
-        // the same triangle twice
-        assert!(tri_tri(&p, &pk, &[p[1], p[2], p[0]], &[2, 3, 1]));
-    }
-
-    #[test]
-    fn coplanar_cases() {
-        let p = [v(0., 0., 0.), v(2., 0., 0.), v(0., 2., 0.)];
-        assert!(plain(p, [v(0.5, 0.5, 0.), v(3., 0.5, 0.), v(0.5, 3., 0.)]));
-        // q inside p
-        assert!(plain(
-            p,
-            [v(0.2, 0.2, 0.), v(0.5, 0.2, 0.), v(0.2, 0.5, 0.)]
-        ));
-        // p inside q
-        assert!(plain(p, [v(-1., -1., 0.), v(9., -1., 0.), v(-1., 9., 0.)]));
-        // beside each other, touching along part of an edge
-        assert!(plain(p, [v(1., 1., 0.), v(3., 1., 0.), v(1., 3., 0.)]));
-        // beside each other, apart
-        assert!(!plain(p, [v(1.1, 1.1, 0.), v(3., 1.1, 0.), v(1.1, 3., 0.)]));
-        // in a tilted plane, where no coordinate plane is the triangle's
-        let m = |x: DVec3| v(x.x + 0.3 * x.y, x.y, 0.7 * x.x - 0.2 * x.y);
-        let p2 = p.map(m);
-        assert!(plain(
-            p2,
-            [v(0.2, 0.2, 0.), v(0.5, 0.2, 0.), v(0.2, 0.5, 0.)].map(m)
-        ));
-        assert!(!plain(
-            p2,
-            [v(1.1, 1.1, 0.), v(3., 1.1, 0.), v(1.1, 3., 0.)].map(m)
-        ));
-    }
-
-    #[test]
-    fn near_parallel_is_exact() {
-        let p = [v(0., 0., 0.), v(1., 0., 0.), v(0., 1., 0.)];
-        // almost parallel, one corner a hair below the plane over p: crosses p
-        let q = [v(0.1, 0.1, -1e-30), v(5., 0.2, 1e-20), v(0.2, 5., 1e-20)];
-        assert!(plain(p, q));
-        // the same but the corner a hair above: all of q above p's plane
-        let q = [v(0.1, 0.1, 1e-30), v(5., 0.2, 1e-20), v(0.2, 5., 1e-20)];
-        assert!(!plain(p, q));
-        // crossing p's plane only outside p
-        let q = [v(1.0, 1.0, -1e-30), v(5., 0.2, 1e-20), v(0.2, 5., 1e-20)];
-        assert!(!plain(p, q));
-    }
-
-    #[test]
-    fn degenerate_other_triangle() {
-        let p = [v(0., 0., 0.), v(1., 0., 0.), v(0., 1., 0.)];
-        // a needle (collinear) through p
-        let q = [v(0.2, 0.2, -1.), v(0.2, 0.2, 0.5), v(0.2, 0.2, 1.)];
-        assert!(plain(p, q));
-        let q = [v(2., 2., -1.), v(2., 2., 0.5), v(2., 2., 1.)];
-        assert!(!plain(p, q));
-        // a needle sharing p's corner, lying along p's edge: overlap beyond the corner
-        let q = [v(0., 0., 0.), v(0.5, 0., 0.), v(0.25, 0., 0.)];
-        assert!(tri_tri(&p, &[1, 2, 3], &q, &[1, 5, 6]));
-        // a needle through the shared corner, pointing away on both sides in the plane
-        let q = [v(0., 0., 0.), v(-0.5, 0.1, 0.), v(0.5, -0.1, 0.)];
-        assert!(!tri_tri(&p, &[1, 2, 3], &q, &[1, 5, 6]));
-        // ... and one that points into p on one side
-        let q = [v(0., 0., 0.), v(-0.5, -0.5, 0.), v(0.5, 0.5, 0.)];
-        assert!(tri_tri(&p, &[1, 2, 3], &q, &[1, 5, 6]));
-        // two needles
-        assert!(tri_tri_plain(
-            &[v(0., 0., 0.), v(1., 1., 1.), v(2., 2., 2.)],
-            &[v(0., 2., 0.), v(2., 0., 2.), v(1., 1., 1.)]
-        ));
-        assert!(!tri_tri_plain(
-            &[v(0., 0., 0.), v(1., 1., 1.), v(2., 2., 2.)],
-            &[v(3., 3., 3.), v(4., 4., 4.), v(5., 5., 5.)]
-        ));
-        assert!(tri_tri_plain(
-            &[v(0., 0., 0.), v(1., 1., 1.), v(2., 2., 2.)],
-            &[v(2., 2., 2.), v(4., 4., 4.), v(5., 5., 5.)]
-        ));
-    }
-
-    proptest! {
-        #![proptest_config(ProptestConfig::with_cases(256))]
-        /// The answer does not depend on the order of the triangles or their corners;
-        /// and on small integer grids (many touching and coplanar cases) it agrees
-        /// with a dense sampling reference when the reference finds a common point.
-        #[test]
-        fn symmetric_and_order_free(c in prop::array::uniform18(-3i32..4)) {
-            let t = |o: usize| [0, 1, 2].map(|i| v(c[o + 3 * i] as f64, c[o + 3 * i + 1] as f64, c[o + 3 * i + 2] as f64));
-            let (p, q) = (t(0), t(9));
-            let r = tri_tri_plain(&p, &q);
-            prop_assert_eq!(r, tri_tri_plain(&q, &p));
-            prop_assert_eq!(r, tri_tri_plain(&[p[1], p[2], p[0]], &[q[2], q[1], q[0]]));
-            // sampled points of p (barycentric grid) that lie exactly in q imply r
-            let n = 8;
-            for i in 0..=n {
-                for j in 0..=(n - i) {
-                    let x = p[0] + (p[1] - p[0]) * (i as f64 / n as f64) + (p[2] - p[0]) * (j as f64 / n as f64);
-                    if proj_axis(q[0], q[1], q[2]).is_some() && x.is_finite() {
-                        let d = o3(q[0], q[1], q[2], x);
-                        let inside = d == 0.0 && seg_tri(x, x, &q);
-                        if inside {
-                            prop_assert!(r);
-                        }
-                    }
-                }
-            }
-        }
-    }
-
-    /// Separating-axis verdict in floating point: `Some(true/false)` when every
-    /// candidate axis is decisive by a margin, `None` when the case is too close
-    /// to call (or an axis is near zero).
-    fn sat(p: &[DVec3; 3], q: &[DVec3; 3]) -> Option<bool> {
-        let ep = [p[1] - p[0], p[2] - p[1], p[0] - p[2]];
-        let eq = [q[1] - q[0], q[2] - q[1], q[0] - q[2]];
-        let (np, nq) = (ep[0].cross(ep[1]), eq[0].cross(eq[1]));
-        let mut axes = vec![np, nq];
-        for a in ep {
-            axes.push(np.cross(a));
-            for b in eq {
-                axes.push(a.cross(b));
-            }
-        }
-        for b in eq {
-            axes.push(nq.cross(b));
-        }
-        let mut separated = false;
-        for ax in axes {
-            let len = ax.length();
-            if len < 1e-6 {
-                return None;
-            }
-            let proj = |t: &[DVec3; 3]| {
-                let d = t.map(|x| x.dot(ax) / len);
-                (d[0].min(d[1]).min(d[2]), d[0].max(d[1]).max(d[2]))
-            };
-            let ((a0, a1), (b0, b1)) = (proj(p), proj(q));
-            if a0 == a1 && b0 == b1 && a0 == b0 {
-                continue; // both flat on this axis, at the same place: no information
-            }
-            let gap = (b0 - a1).max(a0 - b1);
-            if gap.abs() < 1e-9 {
-                return None;
-            }
-            separated |= gap > 0.0;
-        }
-        Some(!separated)
-    }
-
-    proptest! {
-        #![proptest_config(ProptestConfig::with_cases(2000))]
-        /// Agrees with an independent separating-axis test wherever that one is
-        /// decisive; and is unchanged by exact transformations (a power-of-two
-        /// scale, swapping the triangles).
-        #[test]
-        fn agrees_with_separating_axes(c in prop::array::uniform18(-1.0f64..1.0), k in -40i32..40) {
-            let t = |o: usize| [0, 1, 2].map(|i| v(c[o + 3 * i], c[o + 3 * i + 1], c[o + 3 * i + 2]));
-            let (p, q) = (t(0), t(9));
-            let r = tri_tri_plain(&p, &q);
-            if let Some(expect) = sat(&p, &q) {
-                prop_assert_eq!(r, expect);
-            }
-            let s = 2f64.powi(k);
-            prop_assert_eq!(r, tri_tri_plain(&q.map(|x| x * s), &p.map(|x| x * s)));
-        }
-
-        /// Coplanar pairs (both in z = 0) against the same oracle.
-        #[test]
-        fn coplanar_agrees_with_separating_axes(c in prop::array::uniform12(-1.0f64..1.0)) {
-            let t = |o: usize| [0, 1, 2].map(|i| v(c[o + 2 * i], c[o + 2 * i + 1], 0.0));
-            let (p, q) = (t(0), t(6));
-            if let Some(expect) = sat(&p, &q) {
-                prop_assert_eq!(tri_tri_plain(&p, &q), expect);
-            }
-        }
     }
 
     // ---- whole-patch checks -------------------------------------------------
@@ -1579,7 +1033,7 @@ mod tests {
         let e = chk
             .check_patch(&m, &hole, &fan(&hole, v(4.5, 3., 0.)), &checks())
             .unwrap_err();
-        assert!(matches!(e, CheckFailure::SelfIntersection(..)), "{e}");
+        assert!(matches!(e, CheckFailure::SelfIntersection { .. }), "{e}");
     }
 
     #[test]
@@ -1596,10 +1050,13 @@ mod tests {
         let e = chk
             .check_patch(&m, &hole, &fan(&hole, v(3., 3., 1.0)), &checks())
             .unwrap_err();
-        let CheckFailure::SelfIntersection(_, what) = e else {
+        let CheckFailure::SelfIntersection {
+            meets: Meets::MeshFace(f),
+            ..
+        } = e
+        else {
             panic!("{e}")
         };
-        let f: usize = what.strip_prefix("mesh face ").unwrap().parse().unwrap();
         assert!(m
             .tri(crate::mesh::FaceId::from_idx(f))
             .iter()
@@ -1644,7 +1101,13 @@ mod tests {
         let bad = tri(mid0 - side, mid0 + side);
         let e = chk.check_patch(&m, &hole, &bad, &checks()).unwrap_err();
         assert!(
-            matches!(e, CheckFailure::SelfIntersection(_, ref s) if s.starts_with("patch triangle")),
+            matches!(
+                e,
+                CheckFailure::SelfIntersection {
+                    meets: Meets::PatchTriangle(_),
+                    ..
+                }
+            ),
             "{e}"
         );
     }
@@ -1664,17 +1127,20 @@ mod tests {
         chk.check_patch(&m, &lower, &tall, &checks()).unwrap();
         let lid = fan(&upper, v(3., 3., 0.3));
         chk.check_patch(&m, &upper, &lid, &checks()).unwrap();
-        let hole = crate::fill::Hole::new(0, &m, upper.clone(), &crate::policy::Policy::default());
-        let faces = crate::fill::apply_patch(&mut m, &hole, &lid).unwrap();
+        let hole = crate::patch::Hole::new(0, &m, upper.clone(), &crate::policy::Policy::default());
+        let faces = crate::patch::apply_patch(&mut m, &hole, &lid).unwrap();
         // before the commit the faces are scanned as unseen, after it they are indexed
         let e1 = chk.check_patch(&m, &lower, &tall, &checks()).unwrap_err();
         chk.commit(&m, faces);
         let e2 = chk.check_patch(&m, &lower, &tall, &checks()).unwrap_err();
         assert_eq!(e1, e2);
-        let CheckFailure::SelfIntersection(_, what) = e2 else {
+        let CheckFailure::SelfIntersection {
+            meets: Meets::MeshFace(f),
+            ..
+        } = e2
+        else {
             panic!()
         };
-        let f: usize = what.strip_prefix("mesh face ").unwrap().parse().unwrap();
         assert!(f >= m.num_faces() - 8);
     }
 
@@ -1696,23 +1162,23 @@ mod tests {
         // nothing added yet: nothing to meet
         chk.check_against_added(&m, &lower, &tall, &checks())
             .unwrap();
-        let up = crate::fill::Hole::new(1, &m, upper, &policy);
-        let lid = crate::fill::fill_hole(&mut m, &up, &policy, &mut chk);
+        let up = crate::patch::Hole::new(1, &m, upper, &policy);
+        let lid = crate::fill::dispatch::fill_hole(&mut m, &up, &policy, &mut chk);
         assert_eq!(lid.status, crate::report::HoleStatus::Filled);
         m.validate().unwrap();
         let e = chk
             .check_against_added(&m, &lower, &tall, &checks())
             .unwrap_err();
-        assert!(matches!(e, CheckFailure::SelfIntersection(..)), "{e}");
-        let low = crate::fill::Hole::new(0, &m, lower, &policy);
-        let methods = crate::fill::methods_for(&policy, low.class).to_vec();
+        assert!(matches!(e, CheckFailure::SelfIntersection { .. }), "{e}");
+        let low = crate::patch::Hole::new(0, &m, lower, &policy);
+        let methods = crate::fill::dispatch::methods_for(&policy, low.class).to_vec();
         assert!(methods.len() >= 2);
-        let proposal = crate::fill::Proposal {
+        let proposal = crate::fill::dispatch::Proposal {
             tried: Vec::new(),
             accepted: Some((0, tall, q, 0.0)),
             ms: 0.0,
         };
-        let rep = crate::fill::finish_hole(&mut m, &low, &policy, &mut chk, proposal);
+        let rep = crate::fill::dispatch::finish_hole(&mut m, &low, &policy, &mut chk, proposal);
         m.validate().unwrap();
         assert_eq!(
             rep.status,
@@ -1786,7 +1252,8 @@ mod tests {
 
     #[test]
     fn dispatcher_rejects_a_fan_through_an_obstacle_and_fills_without_it() {
-        use crate::fill::{fill_hole, Hole};
+        use crate::fill::dispatch::fill_hole;
+        use crate::patch::Hole;
         use crate::policy::{Method, Policy};
         use crate::report::{HoleStatus, Outcome};
         let mut policy = Policy::default();
@@ -1866,10 +1333,10 @@ mod tests {
                 for (j, u) in p.triangles.iter().enumerate().skip(i + 1) {
                     let (b, bk) = tri(u);
                     if tri_tri(&a, &ak, &b, &bk) {
-                        return Err(CheckFailure::SelfIntersection(
-                            i,
-                            format!("patch triangle {j}"),
-                        ));
+                        return Err(CheckFailure::SelfIntersection {
+                            triangle: i,
+                            meets: Meets::PatchTriangle(j),
+                        });
                     }
                 }
             }
@@ -1878,7 +1345,10 @@ mod tests {
                 for f in 0..m.num_faces() {
                     let (q, qk) = face_tri(&m, f).unwrap();
                     if tri_tri(&a, &ak, &q, &qk) {
-                        return Err(CheckFailure::SelfIntersection(i, format!("mesh face {f}")));
+                        return Err(CheckFailure::SelfIntersection {
+                            triangle: i,
+                            meets: Meets::MeshFace(f),
+                        });
                     }
                 }
             }
@@ -1941,7 +1411,10 @@ mod tests {
             assert_eq!(got_near, want, "round {round}");
             outcomes[match &want {
                 Ok(()) => 0,
-                Err(CheckFailure::SelfIntersection(_, o)) if o.starts_with("patch") => 1,
+                Err(CheckFailure::SelfIntersection {
+                    meets: Meets::PatchTriangle(_),
+                    ..
+                }) => 1,
                 Err(_) => 2,
             }] += 1;
         }

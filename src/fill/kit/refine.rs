@@ -26,34 +26,12 @@
 //! operation is refused when it would create an angle below 15 degrees (or below what
 //! was there); loop vertices never move.
 
-use super::super::{Deadline, FillError};
-use crate::fasthash::HashSet;
+use super::{Deadline, FillError};
+use crate::fasthash::{FxMap, HashSet};
+use crate::geometry::measure;
 use glam::DVec3;
-use std::hash::{BuildHasherDefault, Hasher};
 
-/// A fast hasher for the small integer keys of the edge map (the default SipHash
-/// dominated the refinement time).
-#[derive(Default)]
-pub struct EdgeHasher(u64);
-
-impl Hasher for EdgeHasher {
-    fn finish(&self) -> u64 {
-        self.0
-    }
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.write_u64(b as u64);
-        }
-    }
-    fn write_u32(&mut self, i: u32) {
-        self.write_u64(i as u64);
-    }
-    fn write_u64(&mut self, i: u64) {
-        self.0 = (self.0.rotate_left(5) ^ i).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
-    }
-}
-
-type EdgeMap = std::collections::HashMap<(u32, u32), u32, BuildHasherDefault<EdgeHasher>>;
+type EdgeMap = FxMap<(u32, u32), u32>;
 
 /// The patch during refinement.
 pub struct Refiner<'a> {
@@ -81,23 +59,6 @@ pub struct Refiner<'a> {
 /// Smallest angle (degrees) that relaxation, valence flips and long-edge splits may
 /// create; an operation that would go below it (and below what was there) is refused.
 const SLIVER_GUARD: f64 = 15.0;
-
-/// Smallest angle of a triangle (radians): the one opposite the shortest edge.
-pub fn min_angle(a: DVec3, b: DVec3, c: DVec3) -> f64 {
-    let mut l = [
-        (b - c).length_squared(),
-        (c - a).length_squared(),
-        (a - b).length_squared(),
-    ];
-    l.sort_unstable_by(|x, y| x.total_cmp(y));
-    let [s, m, g] = l;
-    if m.is_nan() || g.is_nan() || m <= 0.0 || g <= 0.0 {
-        return 0.0;
-    }
-    ((m + g - s) / (2.0 * (m * g).sqrt()))
-        .clamp(-1.0, 1.0)
-        .acos()
-}
 
 /// Twice the area of a triangle.
 fn tri_area2(a: DVec3, b: DVec3, c: DVec3) -> f64 {
@@ -291,7 +252,7 @@ impl<'a> Refiner<'a> {
     /// smallest angle before and 15 degrees (a valence flip must not make slivers).
     fn flip_keeps_angles(&self, a: u32, b: u32, c: u32, d: u32) -> bool {
         let [pa, pb, pc, pd] = [a, b, c, d].map(|i| self.pos[i as usize]);
-        let min3 = min_angle;
+        let min3 = measure::smallest_angle_by_cosines;
         let before = min3(pa, pb, pc).min(min3(pb, pa, pd));
         let after = min3(pc, pa, pd).min(min3(pd, pb, pc));
         after >= before.min(SLIVER_GUARD.to_radians())
@@ -319,8 +280,8 @@ impl<'a> Refiner<'a> {
         let c = Self::third(self.tris[t1 as usize], a, b);
         let d = Self::third(self.tris[t2 as usize], a, b);
         let [pa, pb, pc, pd] = [a, b, c, d].map(|i| self.pos[i as usize]);
-        let alpha = super::super::geom::angle_at(pc, pa, pb);
-        let beta = super::super::geom::angle_at(pd, pa, pb);
+        let alpha = measure::angle_at(pc, pa, pb);
+        let beta = measure::angle_at(pd, pa, pb);
         if alpha + beta <= std::f64::consts::PI + 1e-10 {
             return None;
         }
@@ -342,7 +303,7 @@ impl<'a> Refiner<'a> {
                 if v < k {
                     let [p, q, r] =
                         [t[c], t[(c + 1) % 3], t[(c + 2) % 3]].map(|i| self.pos[i as usize]);
-                    angle[v] += super::super::geom::angle_at(p, q, r);
+                    angle[v] += measure::angle_at(p, q, r);
                 }
             }
         }
@@ -473,11 +434,12 @@ impl<'a> Refiner<'a> {
             let d = Self::third(self.tris[t2 as usize], a, b);
             let (pc, pd, pm) = (self.pos[c as usize], self.pos[d as usize], (pa + pb) / 2.0);
             // the split halves the angles at c and d: refuse when that makes slivers
-            let before = min_angle(pa, pb, pc).min(min_angle(pb, pa, pd));
-            let after = min_angle(pa, pm, pc)
-                .min(min_angle(pm, pb, pc))
-                .min(min_angle(pb, pm, pd))
-                .min(min_angle(pm, pa, pd));
+            let before = measure::smallest_angle_by_cosines(pa, pb, pc)
+                .min(measure::smallest_angle_by_cosines(pb, pa, pd));
+            let after = measure::smallest_angle_by_cosines(pa, pm, pc)
+                .min(measure::smallest_angle_by_cosines(pm, pb, pc))
+                .min(measure::smallest_angle_by_cosines(pb, pm, pd))
+                .min(measure::smallest_angle_by_cosines(pm, pa, pd));
             if after < before.min(SLIVER_GUARD.to_radians()) {
                 continue;
             }
@@ -514,7 +476,7 @@ impl<'a> Refiner<'a> {
     /// `limit` (radians) when that raises the smallest angle of the pair; a few
     /// passes. Used after fairing, which can move vertices into slivers.
     pub fn fix_slivers(&mut self, limit: f64, deadline: &Deadline) -> Result<usize, FillError> {
-        let min3 = min_angle;
+        let min3 = measure::smallest_angle_by_cosines;
         let mut flips = 0;
         for _ in 0..4 {
             deadline.check()?;
@@ -656,7 +618,7 @@ impl<'a> Refiner<'a> {
                     let before = match tri_min[t as usize] {
                         m if m.is_nan() => {
                             let b = tri.map(|i| self.pos[i as usize]);
-                            min_angle(b[0], b[1], b[2])
+                            measure::smallest_angle_by_cosines(b[0], b[1], b[2])
                         }
                         m => m,
                     };
@@ -667,7 +629,7 @@ impl<'a> Refiner<'a> {
                             self.pos[i as usize]
                         }
                     });
-                    let after = min_angle(a[0], a[1], a[2]);
+                    let after = measure::smallest_angle_by_cosines(a[0], a[1], a[2]);
                     tri_min[t as usize] = before;
                     after_of.push(after);
                     before_min = before_min.min(before);

@@ -7,15 +7,18 @@
 //! overlaps something. Such a residual front is closed the way paper 002 §5.2 closes a
 //! middle hole: a minimum-weight triangulation of the front loop in 3D (no projection,
 //! so folded loops are fine), refined to the front's edge length and relaxed
-//! ([`crate::fill::min_area_fair`]'s triangulation and refiner), then the new interior
+//! ([`super::triangulate`] and [`super::refine`], as `min_area_fair` uses them), then the new interior
 //! vertices are faired (thin plate, with the patch and mesh triangles around the front
 //! fixed as constraints) so the residual piece continues the surface instead of spanning
 //! it flat. The caller's patch checks judge the result; [`close_keeping_unfaired`] also
 //! returns the piece before the fairing, which the wavefront keeps when the faired one
 //! crosses the triangles around the front (the fairing bulges a residual that sits in a fold).
 
-use super::super::min_area_fair::{refine::Refiner, triangulate};
-use super::super::{fair, Deadline, FillError};
+// `!(x > bound)` is used on purpose: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+use super::refine::Refiner;
+use super::{fair, triangulate, Deadline, FillError};
 use crate::fasthash::{HashMap, HashSet};
 use crate::policy::Policy;
 use glam::DVec3;

@@ -11,9 +11,9 @@
 //! original with the vertices around those triangles held where the method put them,
 //! and only when that fails too is the original kept.
 
-use super::{Hole, Patch};
 use crate::check::CheckFailure;
 use crate::mesh::Mesh;
+use crate::patch::{Hole, Patch};
 use glam::DVec3;
 
 /// The step of each relaxation iteration the dispatcher uses (half way to the
@@ -137,25 +137,6 @@ pub fn tangential_relax_pinned(
 /// Rounds of re-relaxing with more vertices held (see [`relax_checked`]).
 const PIN_ROUNDS: usize = 2;
 
-/// Patch triangles named by a check failure: the failing one and, for a patch-patch
-/// intersection, the other.
-pub fn culprits(e: &CheckFailure) -> Vec<usize> {
-    match e {
-        CheckFailure::SelfIntersection(i, other) => {
-            let mut v = vec![*i];
-            if let Some(j) = other
-                .strip_prefix("patch triangle ")
-                .and_then(|r| r.trim().parse::<usize>().ok())
-            {
-                v.push(j);
-            }
-            v
-        }
-        CheckFailure::Degenerate(i, _) => vec![*i],
-        CheckFailure::Topology(_) => Vec::new(),
-    }
-}
-
 /// Relaxes `patch` ([`tangential_relax`]) and returns the relaxed patch with what
 /// `check` made of it, if it passes. A relaxed patch that fails at some triangles is
 /// relaxed again from `patch` with the new corners of those triangles and their new
@@ -185,7 +166,7 @@ pub fn relax_checked<Q>(
     let mut pinned = vec![false; m];
     for round in 0..PIN_ROUNDS {
         tracing::debug!(hole = hole.id, round, failure = %err, "relaxed patch rejected");
-        let bad = culprits(&err);
+        let bad = err.triangles();
         let mut held: Vec<usize> = bad
             .iter()
             .filter_map(|&t| patch.triangles.get(t))
@@ -230,9 +211,9 @@ pub fn relax_checked<Q>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::check::{check_topology, patch_positions, quality};
-    use crate::fill::{apply_patch, Hole};
+    use crate::check::{check_topology, patch_positions, quality, Meets, TopologyFailure};
     use crate::io::RawMesh;
+    use crate::patch::{apply_patch, Hole};
     use crate::policy::Policy;
 
     /// A planar grid with its middle 2x2 cells removed, and a patch over that hole
@@ -371,7 +352,10 @@ mod tests {
                     .iter()
                     .position(|t| t.contains(&(k + 4)))
                     .unwrap();
-                return Err(CheckFailure::SelfIntersection(t, "mesh face 0".into()));
+                return Err(CheckFailure::SelfIntersection {
+                    triangle: t,
+                    meets: Meets::MeshFace(0),
+                });
             }
             Ok(())
         };
@@ -403,27 +387,18 @@ mod tests {
     fn a_relaxation_that_always_fails_or_fails_its_topology_keeps_the_patch() {
         let (mesh, hole, patch, _) = grid_hole();
         let always = |_: &Patch| -> Result<(), CheckFailure> {
-            Err(CheckFailure::SelfIntersection(
-                0,
-                "patch triangle 17".into(),
-            ))
+            Err(CheckFailure::SelfIntersection {
+                triangle: 0,
+                meets: Meets::PatchTriangle(17),
+            })
         };
         assert!(relax_checked(&mesh, &hole, &patch, 30, RELAX_STEP, always).is_none());
-        let topo =
-            |_: &Patch| -> Result<(), CheckFailure> { Err(CheckFailure::Topology("test".into())) };
+        let topo = |_: &Patch| -> Result<(), CheckFailure> {
+            Err(CheckFailure::Topology(TopologyFailure::NoTriangles))
+        };
         assert!(relax_checked(&mesh, &hole, &patch, 30, RELAX_STEP, topo).is_none());
         let fine = |_: &Patch| -> Result<(), CheckFailure> { Ok(()) };
         assert!(relax_checked(&mesh, &hole, &patch, 0, RELAX_STEP, fine).is_none());
-    }
-
-    #[test]
-    fn culprits_name_both_patch_triangles_of_a_crossing() {
-        let e = CheckFailure::SelfIntersection(3, "patch triangle 11".into());
-        assert_eq!(culprits(&e), vec![3, 11]);
-        let e = CheckFailure::SelfIntersection(3, "mesh face 11".into());
-        assert_eq!(culprits(&e), vec![3]);
-        assert_eq!(culprits(&CheckFailure::Degenerate(5, "x".into())), vec![5]);
-        assert!(culprits(&CheckFailure::Topology("x".into())).is_empty());
     }
 
     #[test]

@@ -58,6 +58,48 @@ pub fn smallest_angle(a: DVec3, b: DVec3, c: DVec3) -> f64 {
     }
 }
 
+/// Sine of the smallest interior angle (which is at most 60 degrees, so the sine is
+/// monotonic in it): cheaper than [`smallest_angle`] for comparisons.
+pub fn smallest_angle_sin(a: DVec3, b: DVec3, c: DVec3) -> f64 {
+    let (la, lb, lc) = (
+        (b - c).length_squared(),
+        (c - a).length_squared(),
+        (a - b).length_squared(),
+    );
+    let (p, q, r, l1, l2) = if la <= lb && la <= lc {
+        (a, b, c, lc, lb)
+    } else if lb <= lc {
+        (b, c, a, la, lc)
+    } else {
+        (c, a, b, lb, la)
+    };
+    let d = (l1 * l2).sqrt();
+    if d > 0.0 {
+        (q - p).cross(r - p).length() / d
+    } else {
+        0.0
+    }
+}
+
+/// The smallest interior angle (radians) by the law of cosines at the corner opposite
+/// the shortest edge (0 for a degenerate triangle); the refinement's reading, which
+/// differs from [`smallest_angle`] in the last bits.
+pub fn smallest_angle_by_cosines(a: DVec3, b: DVec3, c: DVec3) -> f64 {
+    let mut l = [
+        (b - c).length_squared(),
+        (c - a).length_squared(),
+        (a - b).length_squared(),
+    ];
+    l.sort_unstable_by(|x, y| x.total_cmp(y));
+    let [s, m, g] = l;
+    if m.is_nan() || g.is_nan() || m <= 0.0 || g <= 0.0 {
+        return 0.0;
+    }
+    ((m + g - s) / (2.0 * (m * g).sqrt()))
+        .clamp(-1.0, 1.0)
+        .acos()
+}
+
 /// The angle at `p` between the directions to `q` and `r` (radians, 0 when undefined).
 pub fn angle_at(p: DVec3, q: DVec3, r: DVec3) -> f64 {
     let u = q - p;

@@ -12,10 +12,11 @@
 //! With the policy's settings passing (most holes), the result is the same as without
 //! this wrapper; the list is fixed, so the output stays deterministic.
 
-use super::super::{FillContext, FillError, Patch};
+use super::relax::{relax_checked, RELAX_STEP};
+use super::{FillContext, FillError};
 use crate::check::{CheckFailure, Checker, PatchChecks};
 use crate::fasthash::{HashMap, HashSet};
-use crate::fill::relax::{culprits, relax_checked, RELAX_STEP};
+use crate::patch::Patch;
 use crate::policy::Policy;
 use crate::report::PatchQuality;
 
@@ -32,7 +33,7 @@ pub fn first_passing(
 
 /// [`first_passing`] for variants that are not only policies: `run` also gets the
 /// variant's index. Each patch is relaxed tangentially and checked
-/// ([`crate::fill::relax::relax_checked`], as the dispatcher does: the vertices where
+/// ([`super::relax::relax_checked`], as the dispatcher does: the vertices where
 /// the relaxed patch fails are held in place and it is relaxed again), the unrelaxed
 /// one kept when only it passes; the quality returned with the
 /// patch is that of the checks it passed (`None` when there is a single variant: the
@@ -168,7 +169,7 @@ fn repair_by_flips(
         if ctx.deadline.check().is_err() {
             return None;
         }
-        let bad = culprits(&err);
+        let bad = err.triangles();
         if bad.is_empty() {
             return None;
         }
@@ -209,7 +210,7 @@ fn repair_by_flips(
                 match result {
                     Ok(quality) => return Some((q, quality)),
                     Err(e2) => {
-                        let named = culprits(&e2);
+                        let named = e2.triangles();
                         // progress: the flipped pair is no longer what fails
                         if !named.is_empty() && !named.iter().any(|x| *x == t || *x == u) {
                             kept = Some((change, e2));
@@ -243,11 +244,11 @@ fn repair_by_retriangulation(
     state: &PatchChecks,
     err: CheckFailure,
 ) -> Option<(Patch, PatchQuality)> {
-    use super::super::min_area_fair::{forbidden_chords, triangulate};
+    use super::triangulate::{self, forbidden_chords};
     let _ = checker; // the whole check, to compare with in debug builds
     let patch = state.patch();
     let k = ctx.hole.len();
-    let seeds = culprits(&err);
+    let seeds = err.triangles();
     if seeds.is_empty() {
         return None;
     }
@@ -413,9 +414,10 @@ fn repair_by_retriangulation(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fill::relax::tangential_relax;
-    use crate::fill::{Deadline, Hole};
+    use crate::fill::kit::relax::tangential_relax;
+    use crate::fill::kit::Deadline;
     use crate::mesh::Mesh;
+    use crate::patch::Hole;
     use glam::DVec3;
 
     /// A hole in a flat grid, filled by `min_area_fair`, then one new vertex is moved
@@ -481,7 +483,7 @@ mod tests {
         let err = checker
             .check_patch(&mesh, &hole.vertices, &patch, &policy.checks)
             .unwrap_err();
-        assert!(!culprits(&err).is_empty(), "{err}");
+        assert!(!err.triangles().is_empty(), "{err}");
         let near = checker.faces_near(&mesh, &hole.vertices, &patch);
         let state =
             PatchChecks::new(&mesh, &hole.vertices, patch.clone(), &policy.checks, &near).unwrap();

@@ -30,11 +30,50 @@
 //!   among chords leaving at least an eighth of the vertices on each side), recursively,
 //!   until the pieces are small enough for the exhaustive search.
 
-use super::super::{Deadline, FillError};
+use super::{Deadline, FillError};
 use crate::fasthash::{HashMap, HashSet};
+use crate::geometry::measure;
+use crate::mesh::{Mesh, VertexId};
 use crate::policy::TriangulationWeight;
 use glam::DVec3;
 use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
+
+/// Loop chords `(a, b)`, `a < b`, that are existing mesh edges (loop edges excluded).
+pub fn forbidden_chords(mesh: &Mesh, lp: &[VertexId]) -> HashSet<(u32, u32)> {
+    let k = lp.len();
+    let index: HashMap<VertexId, u32> =
+        lp.iter().enumerate().map(|(i, &v)| (v, i as u32)).collect();
+    let mut out = HashSet::default();
+    for (i, &v) in lp.iter().enumerate() {
+        for w in mesh.topo.neighbors(v) {
+            if let Some(&j) = index.get(&w) {
+                let i = i as u32;
+                let adjacent =
+                    (i as usize + 1) % k == j as usize || (j as usize + 1) % k == i as usize;
+                if !adjacent && i != j {
+                    out.insert((i.min(j), i.max(j)));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Unit normal of the mesh face outside each loop edge `v[i] -> v[i+1]` (the face
+/// holding the half-edge `v[i+1] -> v[i]`).
+pub fn outside_normals(mesh: &Mesh, lp: &[VertexId]) -> Vec<Option<DVec3>> {
+    let k = lp.len();
+    (0..k)
+        .map(|i| {
+            let (a, b) = (lp[i], lp[(i + 1) % k]);
+            mesh.topo
+                .outgoing(b)
+                .find(|&h| mesh.topo.to(h) == a)
+                .map(|h| mesh.face_normal_raw(h.face()).normalize_or_zero())
+                .filter(|n| *n != DVec3::ZERO)
+        })
+        .collect()
+}
 
 /// Largest polygon the exhaustive search handles (its tables are O(n²)).
 pub const EXACT_MAX: usize = 600;
@@ -130,7 +169,7 @@ fn dihedral(n1: DVec3, n2: DVec3) -> f64 {
 /// `cos_lim` is the cosine of `inp.min_angle` (computed once by the caller).
 fn tri_weight(inp: &LoopInput, cos_lim: f64, a: u32, m: u32, b: u32) -> W {
     let [pa, pm, pb] = [a, m, b].map(|i| inp.pts[i as usize]);
-    let area = super::super::geom::tri_area(pa, pm, pb);
+    let area = measure::tri_area(pa, pm, pb);
     // the smallest angle is opposite the shortest edge; compare cosines (the squared
     // lengths in order by a three-element sorting network)
     let (mut s, mut m2, mut g) = (
@@ -280,13 +319,13 @@ pub fn exact(inp: &LoopInput, idx: &[u32]) -> Result<Vec<[u32; 3]>, FillError> {
 /// triangulation of the projected loop. `None` when the projection is not simple.
 fn cdt_candidates(inp: &LoopInput) -> Option<Vec<(u32, u32)>> {
     let k = inp.k();
-    let n = super::super::geom::newell_normal(inp.pts);
+    let n = measure::newell_normal(inp.pts);
     if n == DVec3::ZERO {
         return None;
     }
     let u = n.any_orthonormal_vector();
     let v = n.cross(u);
-    let c = super::super::geom::centroid(inp.pts);
+    let c = measure::centroid(inp.pts);
     let p2: Vec<Point2<f64>> = inp
         .pts
         .iter()
@@ -603,17 +642,17 @@ mod tests {
         let area: f64 = t
             .iter()
             .map(|t| {
-                crate::fill::geom::tri_area(
+                crate::geometry::measure::tri_area(
                     pts[t[0] as usize],
                     pts[t[1] as usize],
                     pts[t[2] as usize],
                 )
             })
             .sum();
-        let a1 = crate::fill::geom::tri_area(pts[0], pts[1], pts[2])
-            + crate::fill::geom::tri_area(pts[0], pts[2], pts[3]);
-        let a2 = crate::fill::geom::tri_area(pts[0], pts[1], pts[3])
-            + crate::fill::geom::tri_area(pts[1], pts[2], pts[3]);
+        let a1 = crate::geometry::measure::tri_area(pts[0], pts[1], pts[2])
+            + crate::geometry::measure::tri_area(pts[0], pts[2], pts[3]);
+        let a2 = crate::geometry::measure::tri_area(pts[0], pts[1], pts[3])
+            + crate::geometry::measure::tri_area(pts[1], pts[2], pts[3]);
         assert!((area - a1.min(a2)).abs() < 1e-12);
     }
 
@@ -674,7 +713,7 @@ mod tests {
         let area: f64 = t
             .iter()
             .map(|t| {
-                crate::fill::geom::tri_area(
+                crate::geometry::measure::tri_area(
                     pts[t[0] as usize],
                     pts[t[1] as usize],
                     pts[t[2] as usize],

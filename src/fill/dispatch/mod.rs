@@ -1,0 +1,294 @@
+//! The size-based dispatch of paper 002 (Feng et al. 2020, §3) and the fallback chain.
+//!
+//! Each method is a module with a `fill(&FillContext) -> Result<Patch, FillError>`.
+//! A method only proposes a [`Patch`]; this module checks it ([`crate::check`]),
+//! and only an accepted patch is applied to the mesh, so a rejected one needs no undo.
+//! Every hole ends filled, skipped (with the rule) or failed (with every attempt and why).
+//! The two phases of a fill, holes in parallel then serially in hole order, are in
+//! [`parallel`].
+
+pub mod parallel;
+
+use super::kit::{relax, Deadline, FillContext, FillError};
+use super::{advancing_front, fan, hpde, lssvm_poisson, min_area_fair, wavefront};
+use crate::check::Checker;
+use crate::mesh::Mesh;
+use crate::patch::{apply_patch, Hole, Patch};
+use crate::policy::{Method, Policy};
+use crate::report::{Attempt, HoleClass, HoleReport, HoleStatus, Outcome, PatchQuality};
+use std::time::Instant;
+
+/// Runs one method.
+pub fn run_method(method: Method, ctx: &FillContext) -> Result<Patch, FillError> {
+    run_method_checked(method, ctx).map(|(p, _)| p)
+}
+
+/// Runs one method; with the patch, the quality of the checks it already passed
+/// inside the method (the self-checked methods `wavefront`, `hpde` and
+/// `lssvm_poisson` relax and check their patch with the dispatcher's checker, see
+/// [`crate::fill::kit::retry`]), or `None` when the dispatcher must relax and check it.
+pub fn run_method_checked(
+    method: Method,
+    ctx: &FillContext,
+) -> Result<(Patch, Option<PatchQuality>), FillError> {
+    match method {
+        Method::Fan => fan::fill(ctx).map(|p| (p, None)),
+        Method::MinAreaFair => min_area_fair::fill(ctx).map(|p| (p, None)),
+        Method::AdvancingFront => advancing_front::fill(ctx).map(|p| (p, None)),
+        Method::LssvmPoisson => lssvm_poisson::fill_checked(ctx),
+        Method::Wavefront => wavefront::fill_checked(ctx),
+        Method::Hpde => hpde::fill_checked(ctx),
+    }
+}
+
+/// The method list of a class.
+pub fn methods_for(policy: &Policy, class: HoleClass) -> &[Method] {
+    match class {
+        HoleClass::Small => &policy.dispatch.small,
+        HoleClass::Middle => &policy.dispatch.middle,
+        HoleClass::Large => &policy.dispatch.large,
+    }
+}
+
+/// What the first phase of [`fill_hole`] found for one hole: every attempt so far and,
+/// if one passed the checks against the mesh as it was, that patch.
+#[derive(Clone, Debug)]
+pub struct Proposal {
+    /// Attempts that failed or were rejected, in order.
+    pub tried: Vec<Attempt>,
+    /// The accepted attempt: index in the class's method list, patch, quality, ms.
+    pub accepted: Option<(usize, Patch, PatchQuality, f64)>,
+    /// Time spent, in milliseconds.
+    pub ms: f64,
+}
+
+/// One method on one hole: run it, relax the patch tangentially, check it. `Ok` holds
+/// the checked patch and its quality; `Err` the attempt that failed.
+fn attempt(
+    method: Method,
+    mesh: &Mesh,
+    hole: &Hole,
+    policy: &Policy,
+    checker: &Checker,
+) -> Result<(Patch, PatchQuality, f64), Attempt> {
+    let ta = Instant::now();
+    let ctx = FillContext {
+        mesh,
+        hole,
+        policy,
+        deadline: Deadline::after_ms(policy.limits.hole_time_ms),
+        checker: Some(checker),
+    };
+    let failed = |outcome, reason: String| Attempt {
+        method,
+        outcome,
+        reason,
+        ms: ms_since(ta),
+    };
+    // a method that panics (a bug, or a solver that panics on singular input)
+    // fails over like any other failure: one bad hole never takes the file down
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        run_method_checked(method, &ctx)
+    }))
+    .unwrap_or_else(|_| {
+        Err(FillError::Failed(format!(
+            "internal error in {}",
+            method.name()
+        )))
+    })
+    .and_then(|p| {
+        ctx.deadline.check()?;
+        Ok(p)
+    });
+    let patch = match result {
+        // relaxed and checked by the method itself, with this checker
+        Ok((p, Some(q))) => return Ok((p, q, ms_since(ta))),
+        Ok((p, None)) => p,
+        Err(FillError::Timeout) => {
+            return Err(failed(
+                Outcome::Timeout,
+                format!("time limit of {} ms reached", policy.limits.hole_time_ms),
+            ))
+        }
+        Err(FillError::Failed(why)) => return Err(failed(Outcome::Error, why)),
+    };
+    // even out the triangles tangentially; keep that only if it passes the checks
+    if let Some((relaxed, q)) = relax::relax_checked(
+        mesh,
+        hole,
+        &patch,
+        policy.fair.tangential_relax,
+        relax::RELAX_STEP,
+        |p| checker.check_patch(mesh, &hole.vertices, p, &policy.checks),
+    ) {
+        return Ok((relaxed, q, ms_since(ta)));
+    }
+    match checker.check_patch(mesh, &hole.vertices, &patch, &policy.checks) {
+        Ok(q) => Ok((patch, q, ms_since(ta))),
+        Err(why) => Err(failed(Outcome::Rejected, why.to_string())),
+    }
+}
+
+/// First phase of filling a hole, read-only so that holes can run in parallel: tries
+/// the class's methods in order from `from` and stops at the first patch that passes
+/// every check against `mesh`.
+pub fn propose(
+    mesh: &Mesh,
+    hole: &Hole,
+    policy: &Policy,
+    checker: &Checker,
+    from: usize,
+) -> Proposal {
+    let t0 = Instant::now();
+    let mut tried = Vec::new();
+    if hole.len() >= 3 {
+        for (i, &method) in methods_for(policy, hole.class)
+            .iter()
+            .enumerate()
+            .skip(from)
+        {
+            match attempt(method, mesh, hole, policy, checker) {
+                Ok((patch, q, ms)) => {
+                    return Proposal {
+                        tried,
+                        accepted: Some((i, patch, q, ms)),
+                        ms: ms_since(t0),
+                    }
+                }
+                Err(a) => tried.push(a),
+            }
+        }
+    }
+    Proposal {
+        tried,
+        accepted: None,
+        ms: ms_since(t0),
+    }
+}
+
+/// Second phase, serial in hole order: checks the proposed patch against the patches
+/// of the holes filled before it and applies it; if it meets one, goes on down the
+/// method list with full checks. Returns the hole's log entry. The result depends only
+/// on the mesh the proposals were made on and on the hole order, never on threads.
+pub fn finish_hole(
+    mesh: &mut Mesh,
+    hole: &Hole,
+    policy: &Policy,
+    checker: &mut Checker,
+    proposal: Proposal,
+) -> HoleReport {
+    let t0 = Instant::now();
+    let mut rep = HoleReport {
+        id: hole.id,
+        boundary_vertices: hole.len(),
+        perimeter: hole.perimeter,
+        mean_edge_length: hole.mean_edge_length,
+        class: hole.class,
+        method: None,
+        tried: proposal.tried,
+        status: HoleStatus::Failed,
+        reason: String::new(),
+        added_vertices: 0,
+        added_faces: 0,
+        quality: None,
+        ms: 0.0,
+    };
+    let done = |rep: &mut HoleReport| rep.ms = proposal.ms + ms_since(t0);
+    if hole.len() < 3 {
+        rep.reason = format!(
+            "a loop of {} boundary vertices cannot be filled",
+            hole.len()
+        );
+        done(&mut rep);
+        return rep;
+    }
+    let methods = methods_for(policy, hole.class);
+    let mut next = Some(proposal.accepted);
+    let mut from = methods.len();
+    // the proposal first, then each later method with full checks
+    loop {
+        let candidate = match next.take() {
+            Some(Some((i, patch, q, ms))) => {
+                from = i + 1;
+                match checker.check_against_added(mesh, &hole.vertices, &patch, &policy.checks) {
+                    Ok(()) => Some((i, patch, q, ms)),
+                    Err(why) => {
+                        rep.tried.push(Attempt {
+                            method: methods[i],
+                            outcome: Outcome::Rejected,
+                            reason: why.to_string(),
+                            ms,
+                        });
+                        None
+                    }
+                }
+            }
+            Some(None) => break,
+            None => {
+                if from >= methods.len() {
+                    break;
+                }
+                let p = propose(mesh, hole, policy, checker, from);
+                rep.tried.extend(p.tried);
+                from = methods.len();
+                p.accepted
+            }
+        };
+        let Some((i, patch, quality, ms)) = candidate else {
+            continue;
+        };
+        let method = methods[i];
+        match apply_patch(mesh, hole, &patch) {
+            Ok(faces) => {
+                checker.commit(mesh, faces);
+                rep.tried.push(Attempt {
+                    method,
+                    outcome: Outcome::Accepted,
+                    reason: String::new(),
+                    ms,
+                });
+                rep.method = Some(method);
+                rep.status = HoleStatus::Filled;
+                rep.added_vertices = patch.new_vertices.len();
+                rep.added_faces = patch.triangles.len();
+                rep.quality = Some(quality);
+                done(&mut rep);
+                return rep;
+            }
+            Err(why) => rep.tried.push(Attempt {
+                method,
+                outcome: Outcome::Rejected,
+                reason: why,
+                ms,
+            }),
+        }
+    }
+    rep.reason = if rep.tried.is_empty() {
+        "no method configured".into()
+    } else {
+        let list: Vec<String> = rep
+            .tried
+            .iter()
+            .map(|a| format!("{}: {}", a.method.name(), a.reason))
+            .collect();
+        format!("every method failed ({})", list.join("; "))
+    };
+    done(&mut rep);
+    rep
+}
+
+/// Fills one hole with the class's method list, checking every patch and applying
+/// the first accepted one. Returns the hole's log entry.
+pub fn fill_hole(
+    mesh: &mut Mesh,
+    hole: &Hole,
+    policy: &Policy,
+    checker: &mut Checker,
+) -> HoleReport {
+    let proposal = propose(mesh, hole, policy, checker, 0);
+    finish_hole(mesh, hole, policy, checker, proposal)
+}
+
+fn ms_since(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1000.0
+}

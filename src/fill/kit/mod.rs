@@ -1,0 +1,103 @@
+//! What the methods are built from: the context a method sees ([`FillContext`]), its
+//! error ([`FillError`]) and deadline, and the shared building blocks: minimum-area
+//! triangulation ([`triangulate`]), refinement ([`refine`]), the fairing solver
+//! ([`fair`]), tangential relaxation ([`relax`]), the closing of a residual front
+//! ([`residual`]) and the self-checked variants with their local repairs ([`retry`]).
+
+pub mod fair;
+pub mod refine;
+pub mod relax;
+pub mod residual;
+pub mod retry;
+pub mod triangulate;
+
+use crate::check::Checker;
+use crate::geometry::measure;
+use crate::mesh::Mesh;
+use crate::patch::Hole;
+use crate::policy::Policy;
+use glam::DVec3;
+use std::time::{Duration, Instant};
+
+/// Why a method produced no patch.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum FillError {
+    /// The per-hole time limit ran out.
+    #[error("time limit reached")]
+    Timeout,
+    /// The method cannot fill this hole.
+    #[error("{0}")]
+    Failed(String),
+}
+
+/// A point in time past which a method gives up with [`FillError::Timeout`].
+#[derive(Clone, Copy, Debug)]
+pub struct Deadline(pub Option<Instant>);
+
+impl Deadline {
+    /// A deadline `ms` from now (0: none).
+    pub fn after_ms(ms: u64) -> Deadline {
+        if ms == 0 {
+            Deadline(None)
+        } else {
+            Deadline(Some(Instant::now() + Duration::from_millis(ms)))
+        }
+    }
+    /// No deadline.
+    pub fn none() -> Deadline {
+        Deadline(None)
+    }
+    /// `Err(Timeout)` once the deadline has passed.
+    pub fn check(&self) -> Result<(), FillError> {
+        match self.0 {
+            Some(t) if Instant::now() >= t => Err(FillError::Timeout),
+            _ => Ok(()),
+        }
+    }
+}
+
+/// What a method sees: the mesh (read-only), the hole, the policy, the deadline.
+pub struct FillContext<'a> {
+    pub mesh: &'a Mesh,
+    pub hole: &'a Hole,
+    pub policy: &'a Policy,
+    pub deadline: Deadline,
+    /// The dispatcher's checks over `mesh`, for a method that checks its own patch
+    /// (`None`: the method builds its own, which costs a tree over the whole mesh).
+    pub checker: Option<&'a Checker>,
+}
+
+impl FillContext<'_> {
+    /// Position of patch vertex `i` (boundary vertices only: `i < k`).
+    pub fn boundary_pos(&self, i: usize) -> DVec3 {
+        self.mesh.pos(self.hole.vertices[i])
+    }
+    /// Positions of the loop.
+    pub fn boundary_positions(&self) -> Vec<DVec3> {
+        self.hole
+            .vertices
+            .iter()
+            .map(|&v| self.mesh.pos(v))
+            .collect()
+    }
+}
+
+/// For methods without a coarsening of their own (`wavefront`, `hpde`,
+/// `lssvm_poisson`): `Err` at once when a patch at the loop's mean edge length would
+/// pass `limits.max_patch_triangles` (the loop's projected area over the area of an
+/// equilateral triangle; a lower bound), so that a hole they cannot finish in time goes
+/// to the next method without spending the time limit.
+pub fn check_patch_size(ctx: &FillContext) -> Result<(), FillError> {
+    let cap = ctx.policy.limits.max_patch_triangles;
+    let l = ctx.hole.mean_edge_length;
+    if cap == 0 || l.is_nan() || l <= 0.0 {
+        return Ok(());
+    }
+    let est = measure::vector_area(&ctx.boundary_positions()) / (0.75f64.sqrt() / 2.0 * l * l);
+    if est > cap as f64 {
+        return Err(FillError::Failed(format!(
+            "the patch would have about {est:.0} triangles > limits.max_patch_triangles = {cap}"
+        )));
+    }
+    Ok(())
+}

@@ -1,0 +1,8 @@
+//! Geometry on `f64` points, apart from any mesh: measures of triangles and polygons
+//! ([`measure`]), the exact predicates every method and the checks decide by
+//! ([`predicates`]), the bounding-volume hierarchy of the self-intersection check
+//! ([`bvh`]) and the uniform grid the fronts find their neighbours with ([`grid`]).
+
+pub mod bvh;
+pub mod measure;
+pub mod predicates;
