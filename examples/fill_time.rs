@@ -40,7 +40,13 @@ fn main() {
         None => Policy::default(),
     };
     if let Some(t) = threads {
-        policy.limits.threads = t;
+        policy = match policy.edit(|s| s.limits.threads = t) {
+            Ok(p) => p,
+            Err(e) => {
+                eprintln!("--threads: {e}");
+                std::process::exit(1);
+            }
+        };
     }
     let mut sum = 0.0;
     for f in &files {

@@ -77,8 +77,9 @@ pub fn check_repair(data: &[u8]) {
 /// Repairs `raw` under the default policy (shorter time limit per hole); the result
 /// must rebuild into a valid mesh and keep the input vertices first and bit-exact.
 pub fn check_repair_of(raw: &RawMesh) {
-    let mut policy = Policy::default_policy();
-    policy.limits.hole_time_ms = 2_000;
+    let policy = Policy::default_policy()
+        .edit(|s| s.limits.hole_time_ms = 2_000)
+        .expect("a valid time limit");
     let Ok((out, _report)) = holefill::repair(raw, &policy) else {
         return;
     };

@@ -10,9 +10,10 @@
 //! patch triangles, then the smallest patch triangle meeting a mesh face, with the
 //! smallest such face.
 
+use super::checker::{face_tri, vertex_key, NEW_KEY};
+use super::quality::degenerate_reason;
 use super::{
-    check_topology, degenerate_reason, face_tri, patch_positions, quality, vertex_key,
-    CheckFailure, Degeneracy, Meets, TopologyFailure, NEW_KEY,
+    check_topology, patch_positions, quality, CheckFailure, Degeneracy, Meets, TopologyFailure,
 };
 use crate::geometry::bvh::{boxes_meet, tri_box, Bvh};
 use crate::geometry::predicates::{tri_axis, tri_tri_axes};

@@ -17,7 +17,7 @@ use crate::patch::Patch;
 pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
     let k = ctx.hole.len();
     if k < 3 {
-        return Err(FillError::Failed(format!(
+        return Err(FillError::bad_loop(format!(
             "a loop of {k} vertices has no fan"
         )));
     }

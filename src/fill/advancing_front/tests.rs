@@ -5,11 +5,12 @@
 use super::*;
 use crate::check::{check_degenerate, check_topology, patch_positions, quality};
 use crate::fill::kit::Deadline;
+use crate::fill::kit::{Cause, TooLarge};
 use crate::geometry::measure;
 use crate::io::RawMesh;
 use crate::mesh::Mesh;
 use crate::patch::{apply_patch, Hole};
-use crate::policy::{Checks, Policy};
+use crate::policy::{Checks, Policy, Settings};
 use glam::{DVec2, DVec3};
 use proptest::prelude::*;
 use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
@@ -277,7 +278,7 @@ fn validate(mesh: &Mesh, hole: &Hole, patch: &Patch) -> Stats {
 
 fn no_fair() -> Policy {
     let mut p = Policy::default();
-    p.front.fair = false;
+    p = p.edit(|s| s.front.fair = false).unwrap();
     p
 }
 
@@ -436,7 +437,9 @@ fn dispatcher_fills_a_large_hole_with_the_front() {
     let (mut mesh, lp) = grid_with_hole(30, |c| (c - DVec3::new(15.0, 15.0, 0.0)).length() < 9.0);
     // paper 002's list for large holes (the default puts wavefront first)
     let mut policy = Policy::default();
-    policy.dispatch.large = vec![Method::AdvancingFront, Method::MinAreaFair];
+    policy = policy
+        .edit(|s| s.dispatch.large = vec![Method::AdvancingFront, Method::MinAreaFair])
+        .unwrap();
     let hole = Hole::new(0, &mesh, lp, &policy);
     let mut checker = Checker::new(&mesh);
     let rep = crate::fill::dispatch::fill_hole(&mut mesh, &hole, &policy, &mut checker);
@@ -815,11 +818,14 @@ fn slit_gives_a_clean_error() {
 #[test]
 fn step_cap_gives_a_clean_error() {
     let (mesh, lp) = grid_with_hole(30, |c| (c - DVec3::new(15.0, 15.0, 0.0)).length() < 9.0);
-    let mut policy = Policy::default();
-    policy.front.max_steps_per_vertex = 1;
+    let policy = Policy::default()
+        .edit(|s| s.front.max_steps_per_vertex = 1)
+        .unwrap();
     let (_, r) = run(&mesh, &lp, &policy);
     match r {
-        Err(FillError::Failed(m)) => assert!(m.contains("did not close"), "{m}"),
+        Err(e @ FillError::Failed(Cause::Stuck(_))) => {
+            assert!(e.to_string().contains("did not close"), "{e}")
+        }
         other => panic!("expected a step-cap error, got {other:?}"),
     }
 }
@@ -839,13 +845,12 @@ fn expired_deadline_times_out() {
     assert_eq!(fill(&ctx), Err(FillError::Timeout));
 }
 
+/// A front option out of range never reaches the front: the policy rejects it.
 #[test]
-fn bad_policy_is_an_error() {
-    let (mesh, lp) = grid_with_hole(10, |c| (c - DVec3::new(5.0, 5.0, 0.0)).length() < 3.0);
-    let mut policy = Policy::default();
-    policy.front.alpha = 2.0;
-    let (_, r) = run(&mesh, &lp, &policy);
-    assert!(matches!(r, Err(FillError::Failed(m)) if m.contains("alpha")));
+fn bad_front_options_are_rejected_by_the_policy() {
+    let mut settings = Settings::default();
+    settings.front.alpha = 2.0;
+    assert_eq!(Policy::new(settings).unwrap_err().key, "front.alpha");
 }
 
 proptest! {
@@ -882,12 +887,12 @@ proptest! {
                        small in 30.0f64..100.0, extra in 0.0f64..80.0, fair in proptest::bool::ANY) {
         let (mesh, lp) = sphere_with_hole(4, 0.5);
         let mut policy = Policy::default();
-        policy.front.alpha = alpha;
-        policy.front.omega1 = omega1;
-        policy.front.merge_distance = merge;
-        policy.front.angle_small = small;
-        policy.front.angle_large = small + extra;
-        policy.front.fair = fair;
+        policy = policy.edit(|s| s.front.alpha = alpha).unwrap();
+        policy = policy.edit(|s| s.front.omega1 = omega1).unwrap();
+        policy = policy.edit(|s| s.front.merge_distance = merge).unwrap();
+        policy = policy.edit(|s| s.front.angle_small = small).unwrap();
+        policy = policy.edit(|s| s.front.angle_large = small + extra).unwrap();
+        policy = policy.edit(|s| s.front.fair = fair).unwrap();
         let (hole, r) = run(&mesh, &lp, &policy);
         match r {
             Ok(patch) => {
@@ -955,11 +960,11 @@ fn gives_up_at_once_past_the_patch_size_limit() {
     let (_, r) = run(&mesh, &lp, &policy);
     assert!(r.is_ok(), "{r:?}");
     // with a limit of 100 triangles the estimate alone refuses it
-    policy.limits.max_patch_triangles = 100;
+    policy = policy.edit(|s| s.limits.max_patch_triangles = 100).unwrap();
     let t = std::time::Instant::now();
     let (_, r) = run(&mesh, &lp, &policy);
     match r {
-        Err(FillError::Failed(why)) => assert!(why.contains("max_patch_triangles"), "{why}"),
+        Err(FillError::TooLarge(TooLarge::Estimated { cap: 100, .. })) => {}
         other => panic!("expected a failure, got {other:?}"),
     }
     assert!(t.elapsed().as_secs_f64() < 1.0);
@@ -971,7 +976,9 @@ fn gives_up_at_once_past_the_patch_size_limit() {
         deadline: Deadline::none(),
         checker: None,
     });
-    policy.limits.max_patch_triangles = (est as usize + 1).max(100);
+    policy = policy
+        .edit(|s| s.limits.max_patch_triangles = (est as usize + 1).max(100))
+        .unwrap();
     let (_, r) = run(&mesh, &lp, &policy);
     if let Ok(p) = &r {
         assert!(p.triangles.len() <= policy.limits.max_patch_triangles + 8);

@@ -91,7 +91,7 @@ fn attempt(
         run_method_checked(method, &ctx)
     }))
     .unwrap_or_else(|_| {
-        Err(FillError::Failed(format!(
+        Err(FillError::internal(format!(
             "internal error in {}",
             method.name()
         )))
@@ -110,7 +110,7 @@ fn attempt(
                 format!("time limit of {} ms reached", policy.limits.hole_time_ms),
             ))
         }
-        Err(FillError::Failed(why)) => return Err(failed(Outcome::Error, why)),
+        Err(why) => return Err(failed(Outcome::Error, why.to_string())),
     };
     // even out the triangles tangentially; keep that only if it passes the checks
     if let Some((relaxed, q)) = relax::relax_checked(

@@ -313,7 +313,7 @@ impl Local {
             for c in 0..3 {
                 let (a, b) = (t[c], t[(c + 1) % 3]);
                 if !self.edge_allowed(a, b) {
-                    return Err(FillError::Failed(format!(
+                    return Err(FillError::stuck(format!(
                         "hpde: the triangulation joins loop vertices {a} and {b}, \
                          already joined by a mesh edge"
                     )));

@@ -107,6 +107,7 @@ use super::kit::{check_patch_size, retry, FillContext, FillError};
 use crate::fasthash::HashMap;
 use crate::mesh::{Mesh, VertexId};
 use crate::patch::Patch;
+use crate::policy::{Policy, Settings};
 use glam::DVec3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -130,24 +131,25 @@ pub fn fill_checked(
 
 /// The policy, then without the short-edge collapse (a collapse can pull a vertex across
 /// a fold of the loop), without the smoothing, with neither, then with the next seed.
-pub fn variants(policy: &crate::policy::Policy) -> Vec<(&'static str, crate::policy::Policy)> {
+pub fn variants(policy: &Policy) -> Vec<(&'static str, Policy)> {
     let mut out = vec![("policy", policy.clone())];
-    let mut push = |name: &'static str, p: crate::policy::Policy| {
-        if !out.iter().any(|(_, q)| *q == p) {
-            out.push((name, p));
+    // every change below keeps the policy valid; one that did not would be left out
+    let mut push = |name: &'static str, change: &dyn Fn(&mut Settings)| {
+        if let Ok(p) = policy.edit(change) {
+            if !out.iter().any(|(_, q)| *q == p) {
+                out.push((name, p));
+            }
         }
     };
-    let mut a = policy.clone();
-    a.hpde.collapse_rate = 0.0;
-    push("no collapse", a.clone());
-    let mut b = policy.clone();
-    b.hpde.num_smooth = 0;
-    push("no smoothing", b);
-    a.hpde.num_smooth = 0;
-    push("no collapse, no smoothing", a);
-    let mut c = policy.clone();
-    c.seed = c.seed.wrapping_add(1) & (i64::MAX as u64);
-    push("next seed", c);
+    push("no collapse", &|s| s.hpde.collapse_rate = 0.0);
+    push("no smoothing", &|s| s.hpde.num_smooth = 0);
+    push("no collapse, no smoothing", &|s| {
+        s.hpde.collapse_rate = 0.0;
+        s.hpde.num_smooth = 0;
+    });
+    push("next seed", &|s| {
+        s.seed = s.seed.wrapping_add(1) & (i64::MAX as u64)
+    });
     out
 }
 
@@ -156,20 +158,20 @@ pub fn fill_once(ctx: &FillContext) -> Result<Patch, FillError> {
     let opts = &ctx.policy.hpde;
     let k = ctx.hole.len();
     if k < 3 {
-        return Err(FillError::Failed(format!(
+        return Err(FillError::bad_loop(format!(
             "hpde needs a loop of at least 3 vertices (got {k})"
         )));
     }
     let bp = ctx.boundary_positions();
     if bp.iter().any(|p| !p.is_finite()) {
-        return Err(FillError::Failed(
-            "hpde: a boundary vertex has a non-finite coordinate".into(),
+        return Err(FillError::bad_loop(
+            "hpde: a boundary vertex has a non-finite coordinate",
         ));
     }
     let edge_len = ring_edge_length(ctx.mesh, &ctx.hole.vertices);
     if !(edge_len.is_finite() && edge_len > 0.0) {
-        return Err(FillError::Failed(
-            "hpde: the triangles around the hole have no usable edge length".into(),
+        return Err(FillError::bad_loop(
+            "hpde: the triangles around the hole have no usable edge length",
         ));
     }
     let normals: Vec<DVec3> = ctx

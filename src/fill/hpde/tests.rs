@@ -387,8 +387,8 @@ fn every_improvement_step_keeps_a_valid_disk() {
     ] {
         for (ns, cr) in [(0, 0.0), (0, 0.6), (60, 0.0), (5, 0.9)] {
             let mut policy = Policy::default();
-            policy.hpde.num_smooth = ns;
-            policy.hpde.collapse_rate = cr;
+            policy = policy.edit(|s| s.hpde.num_smooth = ns).unwrap();
+            policy = policy.edit(|s| s.hpde.collapse_rate = cr).unwrap();
             let (hole, r) = run(&mesh, &lp, &policy);
             validate(&mesh, &hole, &r.unwrap());
         }
@@ -436,9 +436,15 @@ fn dispatcher_accepts_hpde_patches() {
     use crate::policy::Method;
     use crate::report::HoleStatus;
     let mut policy = Policy::default();
-    policy.dispatch.small = vec![Method::Hpde];
-    policy.dispatch.middle = vec![Method::Hpde];
-    policy.dispatch.large = vec![Method::Hpde];
+    policy = policy
+        .edit(|s| s.dispatch.small = vec![Method::Hpde])
+        .unwrap();
+    policy = policy
+        .edit(|s| s.dispatch.middle = vec![Method::Hpde])
+        .unwrap();
+    policy = policy
+        .edit(|s| s.dispatch.large = vec![Method::Hpde])
+        .unwrap();
     for (mut mesh, lp) in [
         icosphere_with_hole(3, 0.75),
         icosphere_with_hole(4, 1.1),
@@ -528,11 +534,11 @@ fn non_injective_projection_is_a_clean_error() {
     // +-166 degrees around the axis: even the two unfolded planes fold over
     let (mesh, lp) = cylinder_with_hole(32, 24, 2.9, 1.5);
     let mut policy = Policy::default();
-    policy.hpde.disk_fallback = false;
+    policy = policy.edit(|s| s.hpde.disk_fallback = false).unwrap();
     let (_, r) = run(&mesh, &lp, &policy);
     match r {
-        Err(FillError::Failed(why)) => {
-            assert!(why.contains("simple polygon on any plane"), "{why}")
+        Err(e @ FillError::Failed(_)) => {
+            assert!(e.to_string().contains("simple polygon on any plane"), "{e}")
         }
         other => panic!(
             "expected a projection failure, got {:?}",

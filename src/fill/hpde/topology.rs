@@ -96,7 +96,7 @@ impl Projection {
                 Err(e) => why.push(format!("{}: {e}", plan.name())),
             }
         }
-        Err(FillError::Failed(format!(
+        Err(FillError::bad_loop(format!(
             "hpde: the loop does not project to a simple polygon on any plane ({})",
             why.join("; ")
         )))
@@ -352,7 +352,7 @@ pub fn triangulate(
 ) -> Result<Triangulated, FillError> {
     let k = bp.len();
     let poly = &proj.loop2d;
-    let fail = |m: &str| FillError::Failed(format!("hpde: {m}"));
+    let fail = |m: &str| FillError::stuck(format!("hpde: {m}"));
     // keep predicted points inside, away from the loop and from each other
     let cell = drop_dist.max(1e-300);
     let key = |q: DVec2| ((q.x / cell).floor() as i64, (q.y / cell).floor() as i64);

@@ -247,14 +247,14 @@ impl FairSolver {
         norm: Normalization,
     ) -> Result<FairSolver, FillError> {
         if !(1..=3).contains(&continuity) {
-            return Err(FillError::Failed(format!(
+            return Err(FillError::solver(format!(
                 "fairing continuity {continuity} is not 1, 2 or 3"
             )));
         }
         let n = local.positions.len();
         if local.free.len() != n {
-            return Err(FillError::Failed(
-                "fairing: free flags do not match the vertices".into(),
+            return Err(FillError::solver(
+                "fairing: free flags do not match the vertices",
             ));
         }
         let op = build_operator(local, weights, norm);
@@ -311,7 +311,7 @@ impl FairSolver {
             faer::sparse::SymbolicSparseRowMat::<usize>::new_checked(m, m, row_ptr, None, col_idx);
         let mat = faer::sparse::SparseRowMat::<usize, f64>::new(symbolic, vals)
             .to_col_major()
-            .map_err(|e| FillError::Failed(format!("fairing matrix: {e:?}")))?;
+            .map_err(|e| FillError::solver(format!("fairing matrix: {e:?}")))?;
         let llt = if op.symmetric {
             mat.sp_cholesky(faer::Side::Lower).ok()
         } else {
@@ -326,12 +326,12 @@ impl FairSolver {
                 // fails over.
                 let lu = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| mat.sp_lu()))
                     .map_err(|_| {
-                        FillError::Failed(
-                            "fairing factorisation failed: singular matrix (zero pivot)".into(),
+                        FillError::solver(
+                            "fairing factorisation failed: singular matrix (zero pivot)",
                         )
                     })?
                     .map_err(|e| {
-                        FillError::Failed(format!("fairing factorisation failed: {e:?}"))
+                        FillError::solver(format!("fairing factorisation failed: {e:?}"))
                     })?;
                 Factor::Lu(Box::new(lu))
             }
@@ -376,8 +376,8 @@ impl FairSolver {
             .map(|i| DVec3::new(x[(i, 0)], x[(i, 1)], x[(i, 2)]))
             .collect();
         if out.iter().any(|p| !p.is_finite()) {
-            return Err(FillError::Failed(
-                "fairing gave non-finite positions (singular system)".into(),
+            return Err(FillError::solver(
+                "fairing gave non-finite positions (singular system)",
             ));
         }
         Ok(out)
@@ -405,7 +405,7 @@ impl RowAcc<'_> {
     /// without `v`'s own normalisation.
     fn expand_row(&mut self, v: usize, mult: f64, depth: u8) -> Result<(), FillError> {
         if self.op.nbrs[v].is_empty() {
-            return Err(FillError::Failed(format!(
+            return Err(FillError::solver(format!(
                 "fairing: local vertex {v} has no neighbours"
             )));
         }
@@ -435,7 +435,7 @@ impl RowAcc<'_> {
         }
         let s = self.op.scale[v] * mult;
         if self.op.nbrs[v].is_empty() {
-            return Err(FillError::Failed(format!(
+            return Err(FillError::solver(format!(
                 "fairing: local vertex {v} has no neighbours"
             )));
         }

@@ -4,12 +4,15 @@
 //! ([`fair`]), tangential relaxation ([`relax`]), the closing of a residual front
 //! ([`residual`]) and the self-checked variants with their local repairs ([`retry`]).
 
+mod error;
 pub mod fair;
 pub mod refine;
 pub mod relax;
 pub mod residual;
 pub mod retry;
 pub mod triangulate;
+
+pub use error::{Cause, FillError, TooLarge, VariantFailure, VariantWhy};
 
 use crate::check::Checker;
 use crate::geometry::measure;
@@ -18,17 +21,6 @@ use crate::patch::Hole;
 use crate::policy::Policy;
 use glam::DVec3;
 use std::time::{Duration, Instant};
-
-/// Why a method produced no patch.
-#[derive(Clone, Debug, PartialEq, thiserror::Error)]
-pub enum FillError {
-    /// The per-hole time limit ran out.
-    #[error("time limit reached")]
-    Timeout,
-    /// The method cannot fill this hole.
-    #[error("{0}")]
-    Failed(String),
-}
 
 /// A point in time past which a method gives up with [`FillError::Timeout`].
 #[derive(Clone, Copy, Debug)]
@@ -95,9 +87,10 @@ pub fn check_patch_size(ctx: &FillContext) -> Result<(), FillError> {
     }
     let est = measure::vector_area(&ctx.boundary_positions()) / (0.75f64.sqrt() / 2.0 * l * l);
     if est > cap as f64 {
-        return Err(FillError::Failed(format!(
-            "the patch would have about {est:.0} triangles > limits.max_patch_triangles = {cap}"
-        )));
+        return Err(FillError::TooLarge(TooLarge::Estimated {
+            estimated: est,
+            cap,
+        }));
     }
     Ok(())
 }

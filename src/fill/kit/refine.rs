@@ -26,7 +26,7 @@
 //! operation is refused when it would create an angle below 15 degrees (or below what
 //! was there); loop vertices never move.
 
-use super::{Deadline, FillError};
+use super::{Deadline, FillError, TooLarge};
 use crate::fasthash::{FxMap, HashSet};
 use crate::geometry::measure;
 use glam::DVec3;
@@ -174,9 +174,8 @@ impl<'a> Refiner<'a> {
                 }
             }
             if self.tris.len() + 2 > self.max_triangles {
-                return Err(FillError::Failed(format!(
-                    "refinement would exceed {} triangles",
-                    self.max_triangles
+                return Err(FillError::TooLarge(TooLarge::Refinement(
+                    self.max_triangles,
                 )));
             }
             let nv = self.pos.len() as u32;
@@ -425,9 +424,8 @@ impl<'a> Refiner<'a> {
                 continue;
             }
             if self.tris.len() + 2 > self.max_triangles {
-                return Err(FillError::Failed(format!(
-                    "refinement would exceed {} triangles",
-                    self.max_triangles
+                return Err(FillError::TooLarge(TooLarge::Refinement(
+                    self.max_triangles,
                 )));
             }
             let c = Self::third(self.tris[t1 as usize], a, b);

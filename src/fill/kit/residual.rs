@@ -73,13 +73,13 @@ pub fn close_keeping_unfaired(
 ) -> Result<Closed, FillError> {
     let n = r.ring.len();
     if n < 3 {
-        return Err(FillError::Failed(format!(
+        return Err(FillError::bad_loop(format!(
             "a residual front of {n} vertices cannot be closed"
         )));
     }
     if r.ring.iter().any(|p| !p.is_finite()) || !(r.edge_length > 0.0) {
-        return Err(FillError::Failed(
-            "the residual front has a non-finite coordinate".into(),
+        return Err(FillError::bad_loop(
+            "the residual front has a non-finite coordinate",
         ));
     }
     let input = triangulate::LoopInput {

@@ -13,7 +13,7 @@
 //! this wrapper; the list is fixed, so the output stays deterministic.
 
 use super::relax::{relax_checked, RELAX_STEP};
-use super::{FillContext, FillError};
+use super::{Cause, FillContext, FillError, VariantFailure, VariantWhy};
 use crate::check::{CheckFailure, Checker, PatchChecks};
 use crate::fasthash::{HashMap, HashSet};
 use crate::patch::Patch;
@@ -25,7 +25,7 @@ use crate::report::PatchQuality;
 /// failed.
 pub fn first_passing(
     ctx: &FillContext,
-    variants: &[(&str, Policy)],
+    variants: &[(&'static str, Policy)],
     run: impl Fn(&FillContext) -> Result<Patch, FillError>,
 ) -> Result<Patch, FillError> {
     first_passing_at(ctx, variants, |_, c| run(c)).map(|(p, _)| p)
@@ -40,12 +40,12 @@ pub fn first_passing(
 /// patch is returned as made, unchecked), so the dispatcher need not check it again.
 pub fn first_passing_at(
     ctx: &FillContext,
-    variants: &[(&str, Policy)],
+    variants: &[(&'static str, Policy)],
     run: impl Fn(usize, &FillContext) -> Result<Patch, FillError>,
 ) -> Result<(Patch, Option<PatchQuality>), FillError> {
     // the dispatcher's checker when there is one; else one built on first use
     let mut own: Option<Checker> = None;
-    let mut reasons: Vec<String> = Vec::new();
+    let mut reasons: Vec<VariantFailure> = Vec::new();
     for (at, (name, pol)) in variants.iter().enumerate() {
         ctx.deadline.check()?;
         let sub = FillContext {
@@ -122,19 +122,19 @@ pub fn first_passing_at(
                     }
                     return Ok((r, Some(known)));
                 }
-                reasons.push(format!("{name}: {e}"));
+                reasons.push(VariantFailure {
+                    name,
+                    why: VariantWhy::Rejected(e),
+                });
             }
             Err(FillError::Timeout) => return Err(FillError::Timeout),
-            Err(FillError::Failed(e)) => reasons.push(format!("{name}: {e}")),
+            Err(e) => reasons.push(VariantFailure {
+                name,
+                why: VariantWhy::Failed(Box::new(e)),
+            }),
         }
     }
-    if reasons.len() == 1 {
-        return Err(FillError::Failed(reasons.remove(0)));
-    }
-    Err(FillError::Failed(format!(
-        "every variant failed ({})",
-        reasons.join("; ")
-    )))
+    Err(FillError::Failed(Cause::Variants(reasons)))
 }
 
 /// Logs how long a variant took to be made, relaxed and checked.

@@ -203,7 +203,7 @@ fn tri_weight(inp: &LoopInput, cos_lim: f64, a: u32, m: u32, b: u32) -> W {
 pub fn triangulate(inp: &LoopInput) -> Result<Vec<[u32; 3]>, FillError> {
     let k = inp.k();
     if k < 3 {
-        return Err(FillError::Failed(format!(
+        return Err(FillError::bad_loop(format!(
             "a loop of {k} vertices cannot be triangulated"
         )));
     }
@@ -225,9 +225,7 @@ pub fn triangulate(inp: &LoopInput) -> Result<Vec<[u32; 3]>, FillError> {
 pub fn exact(inp: &LoopInput, idx: &[u32]) -> Result<Vec<[u32; 3]>, FillError> {
     let n = idx.len();
     if n < 3 {
-        return Err(FillError::Failed(
-            "polygon with fewer than 3 vertices".into(),
-        ));
+        return Err(FillError::bad_loop("polygon with fewer than 3 vertices"));
     }
     let at = |i: usize, j: usize| i * n + j;
     let mut best: Vec<Option<W>> = vec![None; n * n];
@@ -297,8 +295,8 @@ pub fn exact(inp: &LoopInput, idx: &[u32]) -> Result<Vec<[u32; 3]>, FillError> {
         }
     }
     if best[at(0, n - 1)].is_none() {
-        return Err(FillError::Failed(
-            "no triangulation of the loop avoids the existing mesh edges".into(),
+        return Err(FillError::stuck(
+            "no triangulation of the loop avoids the existing mesh edges",
         ));
     }
     let mut tris = Vec::with_capacity(n - 2);
@@ -563,9 +561,7 @@ fn divide(inp: &LoopInput, all: Vec<u32>) -> Result<Vec<[u32; 3]>, FillError> {
                 out.extend(exact(inp, &idx)?);
                 continue;
             }
-            return Err(FillError::Failed(
-                "no admissible chord to split the loop".into(),
-            ));
+            return Err(FillError::stuck("no admissible chord to split the loop"));
         };
         let first: Vec<u32> = idx[a..=b].to_vec();
         let mut second: Vec<u32> = idx[b..].to_vec();

@@ -237,15 +237,13 @@ const RELAX_FAIRED: usize = 3;
 pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
     let k = ctx.hole.len();
     if k < 3 {
-        return Err(FillError::Failed(format!(
+        return Err(FillError::bad_loop(format!(
             "a loop of {k} vertices cannot be filled"
         )));
     }
     let pts = ctx.boundary_positions();
     if pts.iter().any(|p| !p.is_finite()) {
-        return Err(FillError::Failed(
-            "the loop has a non-finite coordinate".into(),
-        ));
+        return Err(FillError::bad_loop("the loop has a non-finite coordinate"));
     }
     let forbidden = forbidden_chords(ctx.mesh, &ctx.hole.vertices);
     let outside = outside_normals(ctx.mesh, &ctx.hole.vertices);

@@ -104,8 +104,8 @@ fn planar_hole_gives_a_planar_patch() {
         for c in 0..=3u8 {
             let raw = planar_grid_hole(24, 7.3);
             let (mut mesh, hole, mut policy) = mesh_and_hole(&raw, interior_loop(24));
-            policy.fair.weights = weights;
-            policy.fair.continuity = c;
+            policy = policy.edit(|s| s.fair.weights = weights).unwrap();
+            policy = policy.edit(|s| s.fair.continuity = c).unwrap();
             let patch = fill_checked(&mut mesh, &hole, &policy);
             assert!(!patch.new_vertices.is_empty());
             for p in &patch.new_vertices {
@@ -232,7 +232,9 @@ fn cylinder_hole_stays_on_the_cylinder() {
 #[test]
 fn dihedral_weight_also_fills_the_sphere() {
     let (mut mesh, hole, mut policy) = sphere_case(4, 14.0);
-    policy.refine.weight = TriangulationWeight::DihedralArea;
+    policy = policy
+        .edit(|s| s.refine.weight = TriangulationWeight::DihedralArea)
+        .unwrap();
     let patch = fill_checked(&mut mesh, &hole, &policy);
     let (mean, _) = sphere_error(&patch, 10.0);
     assert!(mean < 0.002, "mean radial error {mean}");
@@ -243,7 +245,7 @@ fn higher_continuity_fits_the_sphere_better_than_membrane() {
     let mut errs = Vec::new();
     for c in 1..=3u8 {
         let (mut mesh, hole, mut policy) = sphere_case(5, 30.0);
-        policy.fair.continuity = c;
+        policy = policy.edit(|s| s.fair.continuity = c).unwrap();
         let patch = fill_checked(&mut mesh, &hole, &policy);
         errs.push(sphere_error(&patch, 10.0).0);
     }
@@ -379,7 +381,7 @@ proptest! {
         restricted in 3usize..80,
     ) {
         let (mut mesh, hole, mut policy) = star_hole(&radii, lift);
-        policy.refine.restricted_search_above = restricted;
+        policy = policy.edit(|s| s.refine.restricted_search_above = restricted).unwrap();
         let ctx = FillContext { mesh: &mesh, hole: &hole, policy: &policy, deadline: Deadline::none(), checker: None };
         let patch = fill(&ctx).unwrap();
         check_topology(&mesh, &hole.vertices, &patch).unwrap();
@@ -442,7 +444,9 @@ fn huge_planar_hole_gets_a_graded_planar_patch() {
     // patch would have some 3,800 triangles; under a cap of 1,000 it is graded
     let raw = planar_grid_hole(60, 25.0);
     let (mut mesh, hole, mut policy) = mesh_and_hole(&raw, interior_loop(60));
-    policy.limits.max_patch_triangles = 1000;
+    policy = policy
+        .edit(|s| s.limits.max_patch_triangles = 1000)
+        .unwrap();
     let k = hole.len();
     let patch = fill_checked(&mut mesh, &hole, &policy);
     assert!(
@@ -484,7 +488,9 @@ fn huge_sphere_hole_gets_a_graded_patch_near_the_sphere() {
     // cap that makes it huge: graded, faired twice; measured 0.4 % of the radius on
     // average and 1.2 % at most (the bounds of the full-density patch above: 1 %)
     let (mut mesh, hole, mut policy) = sphere_case(5, 37.0);
-    policy.limits.max_patch_triangles = 1000;
+    policy = policy
+        .edit(|s| s.limits.max_patch_triangles = 1000)
+        .unwrap();
     let patch = fill_checked(&mut mesh, &hole, &policy);
     assert!(
         patch.triangles.len() < 1000,

@@ -1,0 +1,476 @@
+//! The sections of a policy, each a plain struct with the default of every key (the
+//! values of `config/policy.toml`), and the names of the string-valued keys.
+
+use super::Method;
+use serde::{Deserialize, Serialize};
+
+/// Size classes and the method list of each (first method, then fallbacks).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct Dispatch {
+    pub small_max: usize,
+    pub middle_max: usize,
+    pub small: Vec<Method>,
+    pub middle: Vec<Method>,
+    pub large: Vec<Method>,
+}
+
+impl Default for Dispatch {
+    fn default() -> Self {
+        Dispatch {
+            small_max: 6,
+            middle_max: 50,
+            small: vec![Method::Fan, Method::MinAreaFair],
+            // chosen from the methods table (README): wavefront first is the most
+            // accurate on middle and large bench holes, with the best triangles
+            middle: vec![
+                Method::Wavefront,
+                Method::MinAreaFair,
+                Method::AdvancingFront,
+            ],
+            large: vec![
+                Method::Wavefront,
+                Method::AdvancingFront,
+                Method::MinAreaFair,
+            ],
+        }
+    }
+}
+
+/// Which boundary loops are the outer border of an open scan (skipped, not filled).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct Border {
+    /// Skip a loop with more boundary vertices than this (0: no limit).
+    pub max_vertices: usize,
+    /// Skip a loop whose bounding-box diagonal exceeds this share of the mesh's
+    /// bounding-box diagonal (0: no limit).
+    pub max_bbox_share: f64,
+    /// Apply the rules only to the longest loop of each connected component.
+    pub only_longest: bool,
+}
+
+impl Default for Border {
+    fn default() -> Self {
+        Border {
+            max_vertices: 0,
+            max_bbox_share: 0.6,
+            only_longest: true,
+        }
+    }
+}
+
+/// Boundary cleaning before filling (ALGORITHMS A2).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct Clean {
+    /// Remove tooth faces (faces with two or more edges on a hole's boundary).
+    pub remove_teeth: bool,
+    /// Split boundary edges longer than this many times the loop's mean boundary edge
+    /// length (0: off; the paper's value is 2.0). Changes input faces.
+    pub split_long_edges: f64,
+}
+
+impl Default for Clean {
+    fn default() -> Self {
+        Clean {
+            remove_teeth: false,
+            split_long_edges: 0.0,
+        }
+    }
+}
+
+/// Weight of the minimum-weight triangulation.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum TriangulationWeight {
+    /// Total area (paper 002).
+    Area,
+    /// Liepa's weight: maximum dihedral angle, then area.
+    DihedralArea,
+}
+
+/// Refinement of the initial triangulation to the surrounding density.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct Refine {
+    /// Density factor (paper 002: sqrt 2). 0 switches refinement off.
+    pub density: f64,
+    /// Weight of the initial triangulation.
+    pub weight: TriangulationWeight,
+    /// Loops with more vertices than this use the restricted triangulation search.
+    pub restricted_search_above: usize,
+}
+
+impl Default for Refine {
+    fn default() -> Self {
+        Refine {
+            density: std::f64::consts::SQRT_2,
+            weight: TriangulationWeight::Area,
+            restricted_search_above: 60,
+        }
+    }
+}
+
+/// Laplacian weights.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum Weights {
+    Uniform,
+    Cotangent,
+    Fujiwara,
+}
+
+/// Fairing of the refined patch.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct Fair {
+    /// 0: no fairing, 1: membrane (Laplacian), 2: thin plate (bi-Laplacian), 3: minimum variation.
+    pub continuity: u8,
+    /// Laplacian weights (cotangent falls back to uniform on degenerate angles).
+    pub weights: Weights,
+    /// Tangential relaxation steps applied to every patch after its method (0: off);
+    /// evens out the triangles without moving the faired surface.
+    pub tangential_relax: usize,
+}
+
+impl Default for Fair {
+    fn default() -> Self {
+        Fair {
+            continuity: 2,
+            weights: Weights::Cotangent,
+            tangential_relax: 30,
+        }
+    }
+}
+
+/// The improved advancing front (paper 002 §5.3).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct Front {
+    /// Below this angle (degrees) the vertex is closed with one triangle.
+    pub angle_small: f64,
+    /// Below this angle one new vertex on the bisector; above, two on the trisectors.
+    pub angle_large: f64,
+    /// Weight of the vertex normal in the corrected normal (beta = 1 - alpha).
+    pub alpha: f64,
+    /// Weight of the curvature term in the placement angle (omega2 = 1 - omega1).
+    pub omega1: f64,
+    /// A new vertex closer than this times the local edge length to a front vertex
+    /// is merged into it.
+    pub merge_distance: f64,
+    /// Give up (and fall back) after this many front steps per boundary vertex.
+    pub max_steps_per_vertex: usize,
+    /// Fair the front's patch afterwards (bi-Laplacian, as `[fair]`).
+    pub fair: bool,
+}
+
+impl Default for Front {
+    fn default() -> Self {
+        Front {
+            angle_small: 75.0,
+            angle_large: 135.0,
+            alpha: 0.5,
+            omega1: 0.5,
+            merge_distance: 0.5,
+            max_steps_per_vertex: 200,
+            fair: true,
+        }
+    }
+}
+
+/// LS-SVM + Poisson (paper 003, Xu et al. 2013; ALGORITHMS E).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct Lssvm {
+    /// Rings of mesh vertices around the hole whose Laplacians train the regression.
+    pub rings: usize,
+    /// LS-SVM regularisation `gamma` of eq. 11/14 (larger: closer fit, less smoothing).
+    pub gamma: f64,
+    /// RBF kernel width sigma, in units of the hole loop's radius (perimeter / 2π).
+    pub kernel_width: f64,
+    /// Outer iterations of predict-then-solve (the Laplacian is recomputed each time).
+    pub iterations: usize,
+    /// A new front vertex closer than this times the mean boundary edge length to a
+    /// front vertex is merged into it.
+    pub merge_distance: f64,
+}
+
+impl Default for Lssvm {
+    fn default() -> Self {
+        Lssvm {
+            rings: 3,
+            gamma: 10.0,
+            kernel_width: 0.7,
+            iterations: 2,
+            merge_distance: 0.5,
+        }
+    }
+}
+
+/// HPDE: prediction by differential evolution (paper 000 §4; ALGORITHMS D).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct Hpde {
+    /// DE population size per section plane = this times the number of predicted points.
+    pub population_factor: usize,
+    /// DE mutation factor F.
+    pub f: f64,
+    /// DE crossover rate CR.
+    pub cr: f64,
+    /// DE generations per section plane.
+    pub generations: usize,
+    /// Critical dihedral angle Ac (degrees): below it the hole is handled as two planes.
+    pub ac_deg: f64,
+    /// Critical angle Ic (degrees) between a correspondence line and the boundary.
+    pub ic_deg: f64,
+    /// Smoothing iterations of the new vertices (NumSmooth).
+    pub num_smooth: usize,
+    /// Edges shorter than this times EdgeLen are collapsed.
+    pub collapse_rate: f64,
+    /// Target spacing of predicted points, times EdgeLen.
+    pub spacing: f64,
+    /// Each circular arc also passes through its ring point AP (TV = P - AP is then
+    /// the arc's secant); false: the arc is tangent to TV at P (the literal reading).
+    pub arcs_through_ring: bool,
+    /// When the loop projects to no simple polygon on any plane, map it to a circle
+    /// (by arc length) instead of failing.
+    pub disk_fallback: bool,
+}
+
+impl Default for Hpde {
+    fn default() -> Self {
+        Hpde {
+            population_factor: 3,
+            f: 0.8,
+            cr: 0.05,
+            generations: 50,
+            ac_deg: 90.0,
+            ic_deg: 12.0,
+            num_smooth: 60,
+            collapse_rate: 0.6,
+            spacing: 0.8,
+            arcs_through_ring: true,
+            disk_fallback: true,
+        }
+    }
+}
+
+/// Where the wavefront puts a new point out of the vertex's tangent plane.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum WavefrontPlacement {
+    /// In the plane of the two front edges (paper 004 §2.2; interpolated where that
+    /// plane is ill-conditioned).
+    EdgePlane,
+    /// Elevation interpolated between the two front edges' elevations (follows the
+    /// chords; restoration then tends to flatten).
+    Interpolated,
+}
+
+/// The improved wavefront with curvature restoration (paper 004, ALGORITHMS C).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct Wavefront {
+    /// At or below this front angle (degrees) the vertex is closed with one triangle.
+    pub alpha: f64,
+    /// At or below this angle one new point on the bisector; above, two on the trisectors.
+    pub beta: f64,
+    /// When the smallest front angle is at least this (degrees), a front vertex drawn
+    /// at random (from `seed`) is processed instead.
+    pub mu: f64,
+    /// Rotate each new triangle to its expected normal (paper 004 §2.2.1).
+    pub curvature_restoration: bool,
+    /// Out-of-plane placement of new points.
+    pub placement: WavefrontPlacement,
+    /// After this many front steps per boundary vertex, close the rest as residual fronts.
+    pub max_steps_per_vertex: usize,
+    /// A new point closer than this times the hole's mean boundary edge length to a
+    /// non-adjacent front vertex is merged into it.
+    pub merge_distance: f64,
+    /// A loop with more boundary vertices is left to the next method (0: no limit).
+    pub max_boundary_vertices: usize,
+    /// The front has run away (climbed over the hole into a dome or folded) when its
+    /// patch's area passes this many times the loop's vector area: the run stops and
+    /// the method goes on to its residual-closing variants (0: no limit).
+    pub max_area_ratio: f64,
+}
+
+impl Default for Wavefront {
+    fn default() -> Self {
+        Wavefront {
+            alpha: 75.0,
+            beta: 135.0,
+            mu: 150.0,
+            curvature_restoration: true,
+            placement: WavefrontPlacement::EdgePlane,
+            max_steps_per_vertex: 4,
+            merge_distance: 0.5,
+            max_boundary_vertices: 2000,
+            max_area_ratio: 2.0,
+        }
+    }
+}
+
+/// Patch checks (ALGORITHMS A5).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct Checks {
+    /// Reject a patch whose triangles intersect the mesh or each other.
+    pub self_intersection: bool,
+    /// Smallest allowed angle of a patch triangle, in degrees.
+    pub min_angle_deg: f64,
+}
+
+impl Default for Checks {
+    fn default() -> Self {
+        Checks {
+            self_intersection: true,
+            min_angle_deg: 0.5,
+        }
+    }
+}
+
+/// Time limits.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct Limits {
+    /// Per method attempt on one hole, in milliseconds; past it the next method is tried.
+    pub hole_time_ms: u64,
+    /// Threads that fill independent holes at once (0: one per core). The output
+    /// does not depend on it.
+    pub threads: usize,
+    /// Largest patch (triangles) a method builds for one hole (0: no limit):
+    /// min_area_fair grades its density (fine along the loop, coarse inside) to stay
+    /// near half of it, the other methods give up
+    /// when their estimate (or, for advancing_front, their patch) exceeds it.
+    pub max_patch_triangles: usize,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits {
+            hole_time_ms: 10_000,
+            threads: 0,
+            max_patch_triangles: 50_000,
+        }
+    }
+}
+
+/// Where smoothing applies.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum SmoothScope {
+    Whole,
+    Rings,
+}
+
+/// What smoothing does with boundary vertices.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum BoundaryRule {
+    /// Boundary vertices stay where they are.
+    Fixed,
+    /// Boundary vertices move using only their boundary neighbours.
+    BoundaryNeighbors,
+}
+
+/// Taubin lambda/mu smoothing before filling (ALGORITHMS A4).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct Smooth {
+    pub enabled: bool,
+    pub iterations: usize,
+    pub lambda: f64,
+    pub mu: f64,
+    pub weights: Weights,
+    pub scope: SmoothScope,
+    /// With `scope = "rings"`: how many rings around each hole.
+    pub rings: usize,
+    pub boundary: BoundaryRule,
+}
+
+impl Default for Smooth {
+    fn default() -> Self {
+        Smooth {
+            enabled: false,
+            iterations: 10,
+            lambda: 0.33,
+            mu: -0.34,
+            weights: Weights::Uniform,
+            scope: SmoothScope::Whole,
+            rings: 3,
+            boundary: BoundaryRule::Fixed,
+        }
+    }
+}
+
+/// A name as the policy spells it (methods and the other string-valued keys).
+pub trait PolicyName: Copy + 'static {
+    /// Every value, in policy spelling order.
+    const VALUES: &'static [Self];
+    /// The policy spelling.
+    fn policy_name(self) -> &'static str;
+}
+
+impl PolicyName for TriangulationWeight {
+    const VALUES: &'static [TriangulationWeight] =
+        &[TriangulationWeight::Area, TriangulationWeight::DihedralArea];
+    fn policy_name(self) -> &'static str {
+        match self {
+            TriangulationWeight::Area => "area",
+            TriangulationWeight::DihedralArea => "dihedral_area",
+        }
+    }
+}
+
+impl PolicyName for WavefrontPlacement {
+    const VALUES: &'static [WavefrontPlacement] = &[
+        WavefrontPlacement::EdgePlane,
+        WavefrontPlacement::Interpolated,
+    ];
+    fn policy_name(self) -> &'static str {
+        match self {
+            WavefrontPlacement::EdgePlane => "edge_plane",
+            WavefrontPlacement::Interpolated => "interpolated",
+        }
+    }
+}
+
+impl PolicyName for Weights {
+    const VALUES: &'static [Weights] = &[Weights::Uniform, Weights::Cotangent, Weights::Fujiwara];
+    fn policy_name(self) -> &'static str {
+        match self {
+            Weights::Uniform => "uniform",
+            Weights::Cotangent => "cotangent",
+            Weights::Fujiwara => "fujiwara",
+        }
+    }
+}
+
+impl PolicyName for SmoothScope {
+    const VALUES: &'static [SmoothScope] = &[SmoothScope::Whole, SmoothScope::Rings];
+    fn policy_name(self) -> &'static str {
+        match self {
+            SmoothScope::Whole => "whole",
+            SmoothScope::Rings => "rings",
+        }
+    }
+}
+
+impl PolicyName for BoundaryRule {
+    const VALUES: &'static [BoundaryRule] = &[BoundaryRule::Fixed, BoundaryRule::BoundaryNeighbors];
+    fn policy_name(self) -> &'static str {
+        match self {
+            BoundaryRule::Fixed => "fixed",
+            BoundaryRule::BoundaryNeighbors => "boundary_neighbors",
+        }
+    }
+}
+
+impl PolicyName for Method {
+    const VALUES: &'static [Method] = Method::ALL;
+    fn policy_name(self) -> &'static str {
+        self.name()
+    }
+}
