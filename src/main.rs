@@ -69,6 +69,11 @@ struct FillArgs {
     /// Output format (obj, ply, stl, off); default: the output extension, else the input format.
     #[arg(long)]
     format: Option<String>,
+    /// Input format (obj, ply, stl, off); default: the input extension. For an input
+    /// without one, such as /dev/stdin (the daemon hands its workers the file it
+    /// verified this way).
+    #[arg(long)]
+    input_format: Option<String>,
     /// Print nothing but errors and the FILL_TIME_S line.
     #[arg(long, short)]
     quiet: bool,
@@ -159,7 +164,16 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
     };
     // the fill's worker threads start while the input is read
     holefill::start_workers(&policy);
-    let in_format = Format::from_path(&args.input).ok_or_else(|| {
+    let in_format = match &args.input_format {
+        Some(name) => Some(Format::from_name(name).ok_or_else(|| {
+            Failure(
+                exit::USAGE,
+                format!("--input-format {name}: expected obj, ply, stl or off"),
+            )
+        })?),
+        None => Format::from_path(&args.input),
+    };
+    let in_format = in_format.ok_or_else(|| {
         Failure(
             exit::DATAERR,
             format!(

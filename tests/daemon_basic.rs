@@ -23,7 +23,10 @@ fn four_files_three_repaired_one_failed_daemon_alive() {
     assert!(
         wait_until(LONG, || f.models().len() == 3
             && Folders::files(&f.failed).len() == 2
-            && Folders::files(&f.archive).len() == 3),
+            && Folders::files(&f.archive).len() == 3
+            && ["a.obj", "B.OBJ", "slow.obj"]
+                .iter()
+                .all(|n| f.outbox.join(format!("{n}.repair.json")).is_file())),
         "outbox {:?}, failed {:?}, inbox {:?}\n{}",
         Folders::files(&f.outbox),
         Folders::files(&f.failed),
@@ -377,7 +380,10 @@ fn collision_overwrite_replaces_the_earlier_output_when_asked() {
     let (obj, _) = mesh();
     drop_renamed(&f.inbox, "scan.obj", &obj);
     assert!(
-        wait_until(LONG, || Folders::files(&f.archive) == vec!["scan.obj"]),
+        // the log is published last
+        wait_until(LONG, || Folders::files(&f.archive) == vec!["scan.obj"]
+            && fs::read_to_string(f.outbox.join("scan.obj.repair.json"))
+                .is_ok_and(|t| t.contains("repaired"))),
         "{}",
         d.log()
     );

@@ -217,41 +217,22 @@ fn a_file_whose_daemon_dies_every_time_goes_to_failed_after_max_attempts() {
     assert!(f.processing().is_empty());
 }
 
-/// Lays out what a daemon killed after publishing `x.obj` (model linked into the
-/// outbox, its worker's copy still in its temporary folder) but before archiving the
-/// original leaves behind; with or without the log.
-fn dead_daemon_after_publishing(f: &Folders, obj: &str, with_log: bool) {
-    let host = hostname::get().unwrap().into_string().unwrap();
-    let tag = format!("{host}-{}", u32::MAX - 1); // no such pid: dead
-    let proc_dir = f.inbox.join(".processing").join(&tag);
-    let tmp_dir = f.outbox.join(".holefill-tmp").join(&tag);
-    fs::create_dir_all(&proc_dir).unwrap();
-    fs::create_dir_all(&tmp_dir).unwrap();
-    fs::write(proc_dir.join("x.obj"), obj).unwrap();
-    fs::write(
-        proc_dir.join(".x.obj.holefill.json"),
-        r#"{"attempts":1,"received":"2026-11-23T12:00:00.000Z"}"#,
-    )
-    .unwrap();
-    fs::write(tmp_dir.join("x.obj"), "the repaired model").unwrap();
-    fs::hard_link(tmp_dir.join("x.obj"), f.outbox.join("x.obj")).unwrap();
-    if with_log {
-        fs::write(
-            f.outbox.join("x.obj.repair.json"),
-            r#"{"status":"repaired"}"#,
-        )
-        .unwrap();
-    }
+/// A daemon killed at `point` of publishing `x.obj`; then a new daemon.
+fn killed_while_publishing(f: &Folders, obj: &str, point: &str) -> Daemon {
+    let mut d = Daemon::ready(f, &[], &[("HOLEFILL_TEST_DIE_AT", point)]);
+    drop_renamed(&f.inbox, "x.obj", obj);
+    assert!(d.wait_exit(LONG).is_some(), "{}", d.log());
+    Daemon::ready(f, &[], &[])
 }
 
 #[test]
 fn a_daemon_killed_after_publishing_is_not_repaired_twice() {
     let f = Folders::new();
     let (obj, _) = mesh();
-    dead_daemon_after_publishing(&f, &obj, true);
-    let d = Daemon::ready(&f, &[], &[]);
+    // the model is in the outbox, the original not yet archived, the log not written
+    let d = killed_while_publishing(&f, &obj, "model-published");
     assert!(
-        wait_until(LONG, || Folders::files(&f.archive) == vec!["x.obj"]),
+        wait_until(LONG, || f.outbox.join("x.obj.repair.json").is_file()),
         "{}",
         d.log()
     );
@@ -260,27 +241,23 @@ fn a_daemon_killed_after_publishing_is_not_repaired_twice() {
         vec!["x.obj", "x.obj.repair.json"],
         "no second repair"
     );
-    assert_eq!(
-        fs::read_to_string(f.outbox.join("x.obj")).unwrap(),
-        "the repaired model"
-    );
+    assert_eq!(Folders::files(&f.archive), vec!["x.obj"]);
     assert_eq!(fs::read_to_string(f.archive.join("x.obj")).unwrap(), obj);
     assert!(f.processing().is_empty());
     assert!(d.log().contains("not repaired again"), "{}", d.log());
 }
 
 #[test]
-fn a_daemon_killed_between_model_and_log_is_repaired_again_cleanly() {
+fn a_daemon_killed_between_archive_and_log_finishes_cleanly() {
     let f = Folders::new();
     let (obj, _) = mesh();
-    dead_daemon_after_publishing(&f, &obj, false);
-    let d = Daemon::ready(&f, &[], &[]);
+    // model out, original archived, the log not yet published
+    let d = killed_while_publishing(&f, &obj, "archived");
     assert!(
-        wait_until(LONG, || Folders::files(&f.archive) == vec!["x.obj"]),
+        wait_until(LONG, || f.outbox.join("x.obj.repair.json").is_file()),
         "{}",
         d.log()
     );
-    // the partial publish was withdrawn, the new output takes the plain name
     assert_eq!(
         Folders::files(&f.outbox),
         vec!["x.obj", "x.obj.repair.json"],
@@ -289,9 +266,7 @@ fn a_daemon_killed_between_model_and_log_is_repaired_again_cleanly() {
     );
     let log = Folders::log(&f.outbox, "x.obj");
     assert_eq!(log["status"], "repaired");
-    assert_eq!(log["daemon"]["attempt"], 2);
-    assert_ne!(
-        fs::read_to_string(f.outbox.join("x.obj")).unwrap(),
-        "the repaired model"
-    );
+    assert_eq!(log["daemon"]["attempt"], 1);
+    assert_eq!(Folders::files(&f.archive), vec!["x.obj"]);
+    assert!(f.processing().is_empty());
 }

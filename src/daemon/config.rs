@@ -62,6 +62,7 @@ pub struct FileConfig {
     pub memory_limit_mb: Option<u64>,
     pub grace_secs: Option<u64>,
     pub retry_max_secs: Option<u64>,
+    pub max_wait_secs: Option<u64>,
     pub on_success: Option<OnSuccess>,
     pub collision: Option<Collision>,
     pub log_format: Option<LogFormat>,
@@ -115,6 +116,8 @@ pub struct Settings {
     pub memory_limit_mb: u64,
     pub grace: Duration,
     pub retry_max: Duration,
+    /// A file held open by a writer, or empty, waits at most this long unchanged.
+    pub max_wait: Duration,
     pub on_success: OnSuccess,
     pub collision: Collision,
     pub log_format: LogFormat,
@@ -198,6 +201,12 @@ impl Settings {
                     .unwrap_or(300)
                     .max(1),
             ),
+            max_wait: Duration::from_secs(
+                args.max_wait_secs
+                    .or(file.max_wait_secs)
+                    .unwrap_or(3600)
+                    .max(1),
+            ),
             on_success: args
                 .on_success
                 .or(file.on_success)
@@ -228,19 +237,7 @@ impl Settings {
         if self.rescan.is_zero() {
             bail!("rescan_secs must be at least 1");
         }
-        let folders = [
-            ("inbox", &self.inbox),
-            ("outbox", &self.outbox),
-            ("failed", &self.failed),
-            ("archive", &self.archive),
-        ];
-        for (i, (a, pa)) in folders.iter().enumerate() {
-            for (b, pb) in folders.iter().skip(i + 1) {
-                if pa == pb {
-                    bail!("the {a} and {b} folders are the same: {}", pa.display());
-                }
-            }
-        }
+        // the folders: compared once resolved, by the daemon's start (claim::Layout)
         Ok(())
     }
 
@@ -368,6 +365,7 @@ mod tests {
             "memory_limit_mb",
             "grace_secs",
             "retry_max_secs",
+            "max_wait_secs",
             "on_success",
             "collision",
             "log_format",
@@ -389,13 +387,7 @@ mod tests {
     }
 
     #[test]
-    fn unknown_keys_and_same_folders_are_errors() {
+    fn unknown_keys_are_errors() {
         assert!(toml::from_str::<FileConfig>("inbx = \"/a\"").is_err());
-        let file = FileConfig {
-            inbox: Some("/a".into()),
-            outbox: Some("/a".into()),
-            ..Default::default()
-        };
-        assert!(Settings::resolve(&args(&[]), &file).is_err());
     }
 }

@@ -1,114 +1,292 @@
 //! File operations the daemon's guarantees rest on: moves that never replace an
-//! existing file, folder fsync, the collision rule, UTC time stamps.
+//! existing file (also across file systems), folder fsync, the collision rule, names
+//! as they may be logged, UTC time stamps.
 //!
-//! Moves without replacing: `renameat2(RENAME_NOREPLACE)` is not reachable without
-//! `unsafe` (std does not expose it and the crate forbids unsafe code), so a move into
-//! a shared folder is `link(src, dst)` (which fails when `dst` exists) followed by
-//! `unlink(src)`. Where `link` is refused (a filesystem without hard links, or
-//! `fs.protected_hardlinks` for a file owned by another user) the fallback is a rename
-//! after checking that `dst` is free; where the folders are on different filesystems,
-//! a copy (fsynced) then the link.
+//! Moves without replacing are `renameat2(RENAME_NOREPLACE)` (through `rustix`): one
+//! atomic step that fails with `EEXIST` when the target exists, whoever owns the file
+//! (`link(2)` is refused under `fs.protected_hardlinks` for a file of another user,
+//! the normal case of a daemon moving producers' files). A file system without
+//! `RENAME_NOREPLACE` (`EINVAL`) gets `link(2)` then `unlink(2)`; where that is
+//! refused too the move fails: nothing is ever moved by a check-then-rename. Across
+//! file systems a move is a copy under a temporary name in the target folder, fsync
+//! of the copy, the no-replace rename to the final name, fsync of the target folder,
+//! and only then the removal of the source (and fsync of its folder): a crash at any
+//! point leaves the source, or the complete copy, or both (the caller's record of the
+//! target name tells a recovering daemon which).
 
 use super::config::Collision;
+use rustix::fs::{RenameFlags, CWD};
+use rustix::io::Errno;
+use serde::{Deserialize, Serialize};
+use std::ffi::{OsStr, OsString};
 use std::fs;
 use std::io;
-use std::path::{Path, PathBuf};
+use std::os::unix::ffi::OsStrExt;
+use std::os::unix::fs::{MetadataExt, OpenOptionsExt, PermissionsExt};
+use std::path::Path;
 use std::time::{SystemTime, UNIX_EPOCH};
+
+/// The longest file name of Linux file systems, in bytes.
+pub const NAME_MAX: usize = 255;
+/// The longest inbox name the daemon repairs: its outputs add a time stamp and a
+/// counter (`.20261123T120501Z-1000`, 22 bytes) and `.repair.json` (12 bytes) to it.
+pub const MAX_NAME: usize = NAME_MAX - 22 - 12;
 
 /// fsyncs a folder, so that the renames and links in it are durable.
 pub fn fsync_dir(dir: &Path) -> io::Result<()> {
     fs::File::open(dir)?.sync_all()
 }
 
-/// True when an error is "the disk (or quota) is full".
-pub fn is_disk_full(e: &io::Error) -> bool {
-    matches!(e.raw_os_error(), Some(libc::ENOSPC) | Some(libc::EDQUOT))
+/// A file's identity: device and inode.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub struct FileId {
+    pub dev: u64,
+    pub ino: u64,
 }
 
-/// Moves `src` to `dst` without replacing an existing `dst`: `Err(AlreadyExists)`
-/// when it exists. `Err(NotFound)` when `src` vanished (taken by someone else).
-pub fn move_noreplace(src: &Path, dst: &Path) -> io::Result<()> {
-    match fs::hard_link(src, dst) {
-        Ok(()) => match fs::remove_file(src) {
-            Ok(()) => Ok(()),
-            Err(e) => {
-                // someone else moved `src` away between our link and unlink: the file is
-                // theirs; drop our link
-                let _ = fs::remove_file(dst);
-                Err(e)
-            }
-        },
-        Err(e) if e.kind() == io::ErrorKind::AlreadyExists => Err(e),
-        Err(e) if e.raw_os_error() == Some(libc::EXDEV) => {
-            copy_noreplace(src, dst).and_then(|()| fs::remove_file(src))
+impl FileId {
+    pub fn of(m: &fs::Metadata) -> FileId {
+        FileId {
+            dev: m.dev(),
+            ino: m.ino(),
         }
-        Err(e)
-            if matches!(
-                e.raw_os_error(),
-                Some(libc::EPERM) | Some(libc::EOPNOTSUPP) | Some(libc::EMLINK)
-            ) =>
-        {
-            if fs::symlink_metadata(dst).is_ok() {
-                return Err(io::Error::new(
-                    io::ErrorKind::AlreadyExists,
-                    "target exists",
-                ));
+    }
+    /// The identity of `path` itself (a symlink is not followed).
+    pub fn lstat(path: &Path) -> Option<FileId> {
+        fs::symlink_metadata(path).ok().map(|m| FileId::of(&m))
+    }
+}
+
+/// What the daemon compares to tell that a file did not change: identity, size,
+/// modification time.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Stamp {
+    pub id: FileId,
+    pub size: u64,
+    pub mtime_ns: i128,
+}
+
+impl Stamp {
+    pub fn of(m: &fs::Metadata) -> Stamp {
+        Stamp {
+            id: FileId::of(m),
+            size: m.len(),
+            mtime_ns: m.mtime() as i128 * 1_000_000_000 + m.mtime_nsec() as i128,
+        }
+    }
+}
+
+/// Opens a file for reading without following a symlink and without blocking (a FIFO
+/// or a device opens at once and is then refused by the caller's type check).
+pub fn open_nofollow(path: &Path) -> io::Result<fs::File> {
+    fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK | libc::O_NOCTTY)
+        .open(path)
+}
+
+/// Renames `src` to `dst` unless `dst` exists (`Err(AlreadyExists)`); `Err(NotFound)`
+/// when `src` is gone; `EXDEV` across file systems.
+pub fn rename_noreplace(src: &Path, dst: &Path) -> io::Result<()> {
+    match rustix::fs::renameat_with(CWD, src, CWD, dst, RenameFlags::NOREPLACE) {
+        Ok(()) => Ok(()),
+        // the file system does not know the flag: link (fails on an existing target),
+        // then unlink
+        Err(Errno::INVAL) | Err(Errno::NOSYS) => {
+            fs::hard_link(src, dst)?;
+            fs::remove_file(src).inspect_err(|_| {
+                // someone else moved `src` away between our link and unlink: the file
+                // is theirs; drop our link
+                let _ = fs::remove_file(dst);
+            })
+        }
+        Err(e) => Err(e.into()),
+    }
+}
+
+/// Moves the file `src` to `dir/name` without replacing an existing file; across file
+/// systems by the fsynced copy described in the module documentation, with `tmp_name`
+/// the copy's temporary name in `dir`. `linked` runs once the file is at its target
+/// (before the source of a copy is removed).
+pub fn move_file(
+    src: &Path,
+    dir: &Path,
+    name: &OsStr,
+    tmp_name: &str,
+    linked: &dyn Fn(),
+) -> io::Result<()> {
+    let dst = dir.join(name);
+    match rename_noreplace(src, &dst) {
+        Ok(()) => {
+            linked();
+            Ok(())
+        }
+        Err(e) if e.raw_os_error() == Some(libc::EXDEV) => {
+            copy_across(src, dir, &dst, tmp_name)?;
+            linked();
+            fs::remove_file(src)?;
+            if let Some(p) = src.parent() {
+                fsync_dir(p)?;
             }
-            fs::rename(src, dst)
+            Ok(())
         }
         Err(e) => Err(e),
     }
 }
 
-/// Copies `src` next to `dst` (fsynced), then links it to `dst` without replacing.
-fn copy_noreplace(src: &Path, dst: &Path) -> io::Result<()> {
-    let dir = dst.parent().unwrap_or(Path::new("."));
-    let name = dst
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = dir.join(format!(".{}.{}.copy", name, std::process::id()));
-    let r = (|| {
-        fs::copy(src, &tmp)?;
-        fs::File::open(&tmp)?.sync_all()?;
-        match fs::hard_link(&tmp, dst) {
-            Ok(()) => Ok(()),
-            Err(e) if e.kind() == io::ErrorKind::AlreadyExists => Err(e),
-            Err(_) => {
-                if fs::symlink_metadata(dst).is_ok() {
-                    return Err(io::Error::new(
-                        io::ErrorKind::AlreadyExists,
-                        "target exists",
-                    ));
-                }
-                fs::rename(&tmp, dst)
-            }
-        }
-    })();
+/// Copies `src` (a regular file, not followed) to `dst` in `dir` through `dir/tmp_name`:
+/// copy, fsync, no-replace rename, fsync of `dir`. Keeps the permission bits and the
+/// modification time.
+fn copy_across(src: &Path, dir: &Path, dst: &Path, tmp_name: &str) -> io::Result<()> {
+    let tmp = dir.join(tmp_name);
     let _ = fs::remove_file(&tmp);
+    let r = (|| {
+        let mut from = open_nofollow(src)?;
+        let m = from.metadata()?;
+        if !m.is_file() {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                "not a regular file",
+            ));
+        }
+        let mut to = fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .mode(0o600)
+            .custom_flags(libc::O_NOFOLLOW)
+            .open(&tmp)?;
+        io::copy(&mut from, &mut to)?;
+        to.set_permissions(fs::Permissions::from_mode(m.mode() & 0o777))?;
+        if let Ok(t) = m.modified() {
+            let _ = to.set_modified(t);
+        }
+        to.sync_all()?;
+        rename_noreplace(&tmp, dst)?;
+        fsync_dir(dir)
+    })();
+    if r.is_err() {
+        let _ = fs::remove_file(&tmp);
+    }
     r
 }
 
-/// Links `src` (a temporary file of ours) to `dst`: without replacing under
-/// [`Collision::Timestamp`], replacing atomically (rename) under
-/// [`Collision::Overwrite`]. `src` stays.
-pub fn publish(src: &Path, dst: &Path, rule: Collision) -> io::Result<()> {
-    match rule {
-        Collision::Timestamp => fs::hard_link(src, dst),
-        Collision::Overwrite => {
-            let dir = dst.parent().unwrap_or(Path::new("."));
-            let name = dst
-                .file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default();
-            let tmp = dir.join(format!(".{}.{}.publish", name, std::process::id()));
-            let _ = fs::remove_file(&tmp);
-            fs::hard_link(src, &tmp)?;
-            fs::rename(&tmp, dst).inspect_err(|_| {
-                let _ = fs::remove_file(&tmp);
-            })
+/// True when two regular files have the same bytes (read without following links).
+pub fn same_content(a: &Path, b: &Path) -> bool {
+    use std::io::Read;
+    let (Ok(fa), Ok(fb)) = (open_nofollow(a), open_nofollow(b)) else {
+        return false;
+    };
+    match (fa.metadata(), fb.metadata()) {
+        (Ok(ma), Ok(mb)) if ma.is_file() && mb.is_file() && ma.len() == mb.len() => {}
+        _ => return false,
+    }
+    let (mut ra, mut rb) = (io::BufReader::new(fa), io::BufReader::new(fb));
+    let (mut ba, mut bb) = (vec![0u8; 1 << 16], vec![0u8; 1 << 16]);
+    loop {
+        let n = match ra.read(&mut ba) {
+            Ok(n) => n,
+            Err(_) => return false,
+        };
+        if n == 0 {
+            return rb.read(&mut bb[..1]).map(|m| m == 0).unwrap_or(false);
+        }
+        if rb.read_exact(&mut bb[..n]).is_err() || ba[..n] != bb[..n] {
+            return false;
         }
     }
+}
+
+/// Puts `src` (a temporary file of ours) at `dst`: without replacing under
+/// [`Collision::Timestamp`] (`Err(AlreadyExists)`), replacing atomically under
+/// [`Collision::Overwrite`].
+pub fn publish(src: &Path, dst: &Path, rule: Collision) -> io::Result<()> {
+    match rule {
+        Collision::Timestamp => rename_noreplace(src, dst),
+        Collision::Overwrite => fs::rename(src, dst),
+    }
+}
+
+/// A file name as it may be written into a journal line or a log: control and other
+/// invisible characters (line breaks, bidirectional overrides, ...) and backslashes
+/// escaped Rust-style (`\n`, `\u{202e}`, `\\`), bytes that are not UTF-8 as `\xNN`.
+/// The result is one line of printable text, and two different names never show alike
+/// (the escapes are the only backslashes).
+pub fn shown(name: &OsStr) -> String {
+    let mut out = String::with_capacity(name.len());
+    for chunk in name.as_bytes().utf8_chunks() {
+        for c in chunk.valid().chars() {
+            match c {
+                '"' | '\'' => out.push(c),
+                c if c.is_control()
+                    || matches!(c, '\u{2028}' | '\u{2029}' | '\u{200e}' | '\u{200f}' | '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}') =>
+                {
+                    out.extend(c.escape_unicode())
+                }
+                c => out.extend(c.escape_debug()),
+            }
+        }
+        for b in chunk.invalid() {
+            out.push_str(&format!("\\x{b:02x}"));
+        }
+    }
+    out
+}
+
+/// Why the daemon cannot repair a file under this name, if it cannot: not UTF-8 (a
+/// JSON log could not name it), or too long for its outputs' names.
+pub fn name_problem(name: &OsStr) -> Option<String> {
+    if name.to_str().is_none() {
+        return Some("the file name is not valid UTF-8".to_string());
+    }
+    if name.len() > MAX_NAME {
+        return Some(format!(
+            "the file name has {} bytes; the daemon repairs names of at most {MAX_NAME} bytes (its outputs add a time stamp and `.repair.json`, and a file name holds at most {NAME_MAX} bytes)",
+            name.len()
+        ));
+    }
+    None
+}
+
+/// A name the daemon can use for a file it cannot repair under its own name: the
+/// [`shown`] form, shortened to at most [`MAX_NAME`] bytes with its extension kept.
+pub fn safe_name(name: &OsStr) -> String {
+    let s = shown(name);
+    if s.len() <= MAX_NAME && name_problem(OsStr::new(&s)).is_none() && !s.starts_with('.') {
+        return s;
+    }
+    let s = s.trim_start_matches('.');
+    let (stem, ext) = split_ext(s);
+    let ext = if ext.len() <= 8 { ext } else { "" };
+    if stem.len() + ext.len() <= MAX_NAME && !stem.is_empty() {
+        return format!("{stem}{ext}");
+    }
+    let mut keep = (MAX_NAME - ext.len() - 3).min(stem.len()); // "..." marks the cut
+    while !stem.is_char_boundary(keep) {
+        keep -= 1;
+    }
+    format!("{}...{ext}", &stem[..keep])
+}
+
+/// Hex of a name's bytes (how a record keeps a name that may not be UTF-8).
+pub fn hex(name: &OsStr) -> String {
+    name.as_bytes().iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// The name back from [`hex`]; `None` when malformed or not a plain file name.
+pub fn unhex(s: &str) -> Option<OsString> {
+    if s.len() % 2 != 0 || s.is_empty() {
+        return None;
+    }
+    let bytes: Option<Vec<u8>> = (0..s.len())
+        .step_by(2)
+        .map(|i| u8::from_str_radix(s.get(i..i + 2)?, 16).ok())
+        .collect();
+    let bytes = bytes?;
+    if bytes.contains(&b'/') || bytes.contains(&0) || bytes == b"." || bytes == b".." {
+        return None;
+    }
+    use std::os::unix::ffi::OsStringExt;
+    Some(OsString::from_vec(bytes))
 }
 
 /// Splits `scan01.obj` into `("scan01", ".obj")`.
@@ -134,8 +312,9 @@ pub fn candidate_name(name: &str, when: SystemTime, n: usize) -> String {
     }
 }
 
-/// The first candidate name under which neither `dir/NAME` nor `dir/NAME + suffix` (for
-/// each suffix) exists. Under [`Collision::Overwrite`], `name` itself.
+/// The first candidate name, from the `skip`-th on, under which neither `dir/NAME` nor
+/// `dir/NAME + suffix` (for each suffix) exists. Under [`Collision::Overwrite`], `name`
+/// itself.
 pub fn free_name(
     dir: &Path,
     name: &str,
@@ -159,30 +338,6 @@ pub fn free_name(
         }
         n += 1;
     }
-}
-
-/// Moves `src` into folder `dir` under `name` or, when taken, the collision rule's next
-/// name; writes nothing over an existing file (even under `Overwrite`: the failed and
-/// archive folders keep every original). Returns the final path.
-pub fn move_into(src: &Path, dir: &Path, name: &str, suffixes: &[&str]) -> io::Result<PathBuf> {
-    let when = SystemTime::now();
-    let mut skip = 0;
-    for _ in 0..1000 {
-        let cand = free_name(dir, name, suffixes, when, Collision::Timestamp, skip);
-        let dst = dir.join(&cand);
-        match move_noreplace(src, &dst) {
-            Ok(()) => return Ok(dst),
-            Err(e) if e.kind() == io::ErrorKind::AlreadyExists => {
-                skip += 1;
-                continue;
-            }
-            Err(e) => return Err(e),
-        }
-    }
-    Err(io::Error::other(format!(
-        "no free name for {name} in {}",
-        dir.display()
-    )))
 }
 
 /// Days since 1970-01-01 to (year, month, day) (proleptic Gregorian).
@@ -285,37 +440,83 @@ mod tests {
     }
 
     #[test]
-    fn move_noreplace_never_overwrites() {
+    fn rename_noreplace_never_overwrites() {
         let d = tempfile::tempdir().unwrap();
         let a = d.path().join("a");
         let b = d.path().join("b");
         fs::write(&a, "A").unwrap();
         fs::write(&b, "B").unwrap();
-        let e = move_noreplace(&a, &b).unwrap_err();
+        let e = rename_noreplace(&a, &b).unwrap_err();
         assert_eq!(e.kind(), io::ErrorKind::AlreadyExists);
         assert_eq!(fs::read_to_string(&b).unwrap(), "B");
         assert_eq!(fs::read_to_string(&a).unwrap(), "A");
         let c = d.path().join("c");
-        move_noreplace(&a, &c).unwrap();
+        rename_noreplace(&a, &c).unwrap();
         assert!(!a.exists());
         assert_eq!(fs::read_to_string(&c).unwrap(), "A");
         assert_eq!(
-            move_noreplace(&a, &d.path().join("e")).unwrap_err().kind(),
+            rename_noreplace(&a, &d.path().join("e"))
+                .unwrap_err()
+                .kind(),
             io::ErrorKind::NotFound
         );
     }
 
     #[test]
-    fn move_into_uses_the_collision_rule() {
+    fn move_file_keeps_an_existing_target() {
         let d = tempfile::tempdir().unwrap();
         let dst = d.path().join("dst");
         fs::create_dir(&dst).unwrap();
         fs::write(dst.join("s.obj"), "old").unwrap();
         let src = d.path().join("s.obj");
         fs::write(&src, "new").unwrap();
-        let p = move_into(&src, &dst, "s.obj", &[]).unwrap();
-        assert_ne!(p, dst.join("s.obj"));
-        assert_eq!(fs::read_to_string(&p).unwrap(), "new");
+        let hit = std::cell::Cell::new(false);
+        let e = move_file(&src, &dst, OsStr::new("s.obj"), ".t", &|| hit.set(true));
+        assert_eq!(e.unwrap_err().kind(), io::ErrorKind::AlreadyExists);
+        assert!(!hit.get());
+        move_file(&src, &dst, OsStr::new("s2.obj"), ".t", &|| hit.set(true)).unwrap();
+        assert!(hit.get());
+        assert_eq!(fs::read_to_string(dst.join("s2.obj")).unwrap(), "new");
         assert_eq!(fs::read_to_string(dst.join("s.obj")).unwrap(), "old");
+        assert!(!src.exists());
+    }
+
+    #[test]
+    fn copies_compare_by_content() {
+        let d = tempfile::tempdir().unwrap();
+        let (a, b, c) = (d.path().join("a"), d.path().join("b"), d.path().join("c"));
+        fs::write(&a, "same").unwrap();
+        fs::write(&b, "same").unwrap();
+        fs::write(&c, "diff").unwrap();
+        assert!(same_content(&a, &b));
+        assert!(!same_content(&a, &c));
+        assert!(!same_content(&a, &d.path().join("none")));
+    }
+
+    #[test]
+    fn names_are_shown_on_one_line_and_kept_losslessly() {
+        use std::os::unix::ffi::OsStrExt;
+        assert_eq!(shown(OsStr::new("scan 01.obj")), "scan 01.obj");
+        assert_eq!(shown(OsStr::new("a\nWARN b.obj")), "a\\u{a}WARN b.obj");
+        assert_eq!(shown(OsStr::new("a\\b\u{202e}.obj")), "a\\\\b\\u{202e}.obj");
+        assert_eq!(shown(OsStr::new("é\"'.obj")), "é\"'.obj");
+        let bad = OsStr::from_bytes(b"bad\xff.obj");
+        assert_eq!(shown(bad), "bad\\xff.obj");
+        assert_eq!(unhex(&hex(bad)).as_deref(), Some(bad));
+        assert_eq!(unhex("2f"), None, "a slash is never a name");
+        assert_eq!(unhex("2e2e"), None);
+        assert!(name_problem(bad).is_some());
+        assert!(name_problem(OsStr::new("ok.obj")).is_none());
+        let long = format!("{}.obj", "a".repeat(246));
+        assert!(name_problem(OsStr::new(&long)).is_some());
+        let safe = safe_name(OsStr::new(&long));
+        assert!(
+            safe.len() <= MAX_NAME && safe.ends_with("....obj"),
+            "{safe}"
+        );
+        assert_eq!(safe_name(bad), "bad\\xff.obj");
+        assert_eq!(safe_name(OsStr::new("x.obj")), "x.obj");
+        let dotted = safe_name(OsStr::from_bytes(b".\xff.obj"));
+        assert!(!dotted.starts_with('.'), "{dotted}");
     }
 }

@@ -4,40 +4,54 @@
 //! It knows nothing of geometry: each repair is a `holefill fill` child process
 //! ([`worker`]). The pieces:
 //! - [`config`]: `config/holefill.toml` and the flags that override it;
+//! - [`watch`]: the inbox's inotify events;
 //! - [`queue`]: which files wait in the inbox and when each is complete enough to take
-//!   (renamed in, or written in place and settled);
-//! - [`claim`]: the atomic claim into this daemon's processing folder, the attempt
-//!   counter, the recovery of dead daemons' files;
-//! - [`worker`]: limits, the child process, outbox / failed folder / back into the inbox;
-//! - [`fsops`]: moves that never overwrite, folder fsync, the collision rule.
+//!   (nobody holds it open, it stopped changing);
+//! - [`claim`]: the folders and their checks, the atomic claim, the job records, the
+//!   lock that tells a live daemon from a dead one, the adoption of dead daemons' files;
+//! - [`worker`]: the checks of the claimed file, limits, the child process, and the
+//!   crash-safe publish (outbox, archive) or failure;
+//! - [`fsops`]: moves that never overwrite (also across file systems), fsync, the
+//!   collision rule, names as they may be logged;
+//! - [`hooks`]: test-only hooks (cargo feature `test-hooks`).
 //!
-//! The main loop (one tokio task) takes change events (notify; rescans at start-up, on
-//! overflow and on a timer; or polling), claims complete files while fewer than
-//! `workers` repairs run, and handles signals: SIGTERM/SIGINT stop claiming and let the
-//! running repairs finish within the grace period (then kill them and put their files
-//! back), SIGHUP reloads the config and policy. It tells systemd READY=1 after the
-//! start-up scan, STATUS= with counts, WATCHDOG=1 pings, STOPPING=1.
+//! The main loop (one tokio task) takes change events (rescans at start-up, on
+//! overflow and on a timer; or polling), keeps the folders there (recreating a folder
+//! that vanished, with a rate-limited error while it cannot), claims ready files while
+//! fewer than `workers` repairs run, and handles signals: SIGTERM/SIGINT stop claiming
+//! and let the running repairs finish within the grace period (then kill them and put
+//! their files back), SIGHUP reloads the config and policy. It tells systemd READY=1
+//! after the start-up scan, STATUS= with counts, WATCHDOG=1 pings, STOPPING=1.
+//!
+//! Every file name that reaches the journal goes through [`fsops::shown`]: one line of
+//! printable text, whatever bytes the name holds.
 
 mod claim;
 mod config;
 mod fsops;
+mod hooks;
 mod queue;
 mod sniff;
+mod watch;
 mod worker;
 
 use anyhow::{Context, Result};
-use claim::{Identity, Layout};
+use claim::{Home, Identity, Job, Layout, Phase};
 use config::{Collision, LogFormat, OnSuccess, Settings};
+use fsops::shown;
 use holefill::policy::Policy;
+use hooks::Hooks;
 use queue::{Pending, Seen};
 use sd_notify::NotifyState;
-use std::collections::{HashMap, HashSet, VecDeque};
+use std::collections::{HashMap, VecDeque};
+use std::ffi::{OsStr, OsString};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-use tokio::sync::{mpsc, watch};
-use worker::{Done, Job, RunCtx, TestHooks};
+use tokio::sync::{mpsc, watch as tokio_watch};
+use watch::{Ev, Watcher};
+use worker::{Done, RunCtx};
 
 /// Options of `holefill watch` (each overrides the config file's key of the same name).
 #[derive(clap::Args, Debug, Clone, Default)]
@@ -100,6 +114,10 @@ pub struct WatchArgs {
     /// Longest back-off before retrying a file after a retryable failure [default: 300].
     #[arg(long)]
     pub retry_max_secs: Option<u64>,
+    /// A file still held open by a writer, or still empty, is waited for at most this
+    /// long without a change [default: 3600].
+    #[arg(long)]
+    pub max_wait_secs: Option<u64>,
     /// What becomes of a repaired original [default: archive].
     #[arg(long, value_enum)]
     pub on_success: Option<OnSuccess>,
@@ -157,9 +175,14 @@ fn sd(states: &[NotifyState]) {
 
 /// Validates the policy file of `settings` and writes the exact text validated into
 /// `dir` for the workers (so that an edit of the file takes effect only on SIGHUP).
-fn snapshot_policy(settings: &Settings, dir: &Path, generation: u32) -> Result<Option<PathBuf>> {
+/// Returns the snapshot's path and the text.
+fn snapshot_policy(
+    settings: &Settings,
+    dir: &Path,
+    generation: u32,
+) -> Result<(Option<PathBuf>, Option<String>)> {
     let Some(src) = &settings.policy else {
-        return Ok(None);
+        return Ok((None, None));
     };
     let text = std::fs::read_to_string(src)
         .with_context(|| format!("{}: cannot read the policy", src.display()))?;
@@ -167,7 +190,7 @@ fn snapshot_policy(settings: &Settings, dir: &Path, generation: u32) -> Result<O
     let snap = dir.join(format!("policy-{generation}.toml"));
     holefill::io::write_atomic(&snap, text.as_bytes())
         .map_err(|e| anyhow::anyhow!("cannot store the policy snapshot: {e}"))?;
-    Ok(Some(snap))
+    Ok((Some(snap), Some(text)))
 }
 
 /// The signals the daemon handles.
@@ -188,29 +211,40 @@ impl Signals {
     }
 }
 
+/// Rate limit of repeated errors (a folder that cannot be created, a foreign folder).
+const ERROR_EVERY: Duration = Duration::from_secs(60);
+/// How often the folders are checked while all is well.
+const FOLDER_CHECK: Duration = Duration::from_secs(1);
+
 struct Daemon {
     args: WatchArgs,
     settings: Settings,
-    id: Identity,
+    id: Arc<Identity>,
     layout: Layout,
+    /// Our processing folder.
+    home: Arc<Home>,
+    /// Folders of dead daemons whose files we finish.
+    adopted: Vec<Arc<Home>>,
     ctx: Arc<RunCtx>,
     generation: u32,
+    /// The validated policy text of this generation (rewritten if its folder vanished).
+    policy_text: Option<String>,
     pending: Pending,
-    /// Crashed attempts waiting to run again (files in our folder), with their time.
+    /// Jobs waiting to run (again), with their time.
     again: VecDeque<(Job, Instant)>,
-    working: HashSet<String>,
+    /// Running jobs: id -> (home tag, shown name).
+    working: HashMap<String, (String, String)>,
     /// Retryable failures per inbox name (for the back-off).
-    retries: HashMap<String, u32>,
-    /// Names we put back with link(2): their create event is ours, not a writer's.
-    expect_create: HashSet<String>,
+    retries: HashMap<OsString, u32>,
+    /// Names we put back: their rename event is ours, not a producer's.
+    expect: HashMap<OsString, Seen>,
     repaired: u64,
     failed: u64,
-    cancel: watch::Sender<bool>,
+    cancel: tokio_watch::Sender<bool>,
     done_tx: mpsc::UnboundedSender<Done>,
     done_rx: mpsc::UnboundedReceiver<Done>,
-    events: Option<mpsc::Receiver<notify::Result<notify::Event>>>,
-    events_on: bool,
-    _watcher: Option<notify::RecommendedWatcher>,
+    events: Option<mpsc::Receiver<Ev>>,
+    watcher: Option<Watcher>,
     rescan_flag: Arc<AtomicBool>,
     last_scan: Instant,
     last_status: String,
@@ -218,33 +252,44 @@ struct Daemon {
     last_ping: Instant,
     stopping: Option<Instant>,
     cancelled: bool,
+    /// Last time each repeated error was logged.
+    errors: HashMap<String, Instant>,
+    folders_checked: Option<Instant>,
+    folders_ok: bool,
 }
 
 impl Daemon {
     async fn start(args: WatchArgs, settings: Settings) -> Result<Daemon> {
-        let id = Identity::current();
+        let id = Arc::new(Identity::current());
         let layout = Layout::create(
             &settings.inbox,
             &settings.outbox,
             &settings.failed,
             &settings.archive,
-            &id,
         )
-        .context("cannot create the folders")?;
+        .map_err(|e| anyhow::anyhow!("{e}"))
+        .context("refused folders")?;
+        let home = Arc::new(Home::create(&layout, &id.tag()).with_context(|| {
+            format!(
+                "cannot create this daemon's folder in {}",
+                layout.processing_root.display()
+            )
+        })?);
         worker::probe_limits(settings.memory_limit_mb)?;
-        let policy = snapshot_policy(&settings, &layout.tmp, 0)?;
+        let (policy, policy_text) = snapshot_policy(&settings, &home.tmp, 0)?;
         let exe = std::env::current_exe().context("cannot find the holefill executable")?;
         let cores = std::thread::available_parallelism()
             .map(|n| n.get())
             .unwrap_or(1);
-        let hooks = TestHooks::from_env();
-        if hooks.slow.is_some() || hooks.crash_on.is_some() {
-            tracing::warn!("test hooks active (HOLEFILL_TEST_*): {hooks:?}");
+        let hooks = Hooks::from_env();
+        if let Some(w) = hooks.warning() {
+            tracing::warn!("{w}");
         }
         let ctx = Arc::new(RunCtx {
             layout: layout.clone(),
             host: id.host.clone(),
             pid: id.pid,
+            instance: id.instance.clone(),
             settings: settings.clone(),
             policy,
             policy_source: settings.policy.clone(),
@@ -252,29 +297,19 @@ impl Daemon {
             hooks,
             cores,
         });
-        let (cancel, _) = watch::channel(false);
+        let (cancel, _) = tokio_watch::channel(false);
         let (done_tx, done_rx) = mpsc::unbounded_channel();
         let rescan_flag = Arc::new(AtomicBool::new(false));
 
         // the watcher first, then the scan: a file arriving in between is seen by one
-        let (events, watcher) = if settings.poll {
+        let (watcher, events) = if settings.poll {
             (None, None)
         } else {
-            let (tx, rx) = mpsc::channel(4096);
-            let flag = rescan_flag.clone();
-            let mut w = notify::recommended_watcher(move |res: notify::Result<notify::Event>| {
-                // a full queue loses events: rescan instead (memory stays bounded)
-                if tx.try_send(res).is_err() {
-                    flag.store(true, Ordering::SeqCst);
-                }
-            })
-            .context("cannot start the inbox watcher (try poll = true)")?;
-            use notify::Watcher;
-            w.watch(&layout.inbox, notify::RecursiveMode::NonRecursive)
-                .with_context(|| {
+            let (w, rx) =
+                Watcher::start(&layout.inbox, 16_384, rescan_flag.clone()).with_context(|| {
                     format!("cannot watch {} (try poll = true)", layout.inbox.display())
                 })?;
-            (Some(rx), Some(w))
+            (Some(w), Some(rx))
         };
         let mut usec = 0;
         let watchdog = sd_notify::watchdog_enabled(false, &mut usec)
@@ -285,20 +320,22 @@ impl Daemon {
             settings,
             id,
             layout,
+            home,
+            adopted: Vec::new(),
             ctx,
             generation: 0,
+            policy_text,
             again: VecDeque::new(),
-            working: HashSet::new(),
+            working: HashMap::new(),
             retries: HashMap::new(),
-            expect_create: HashSet::new(),
+            expect: HashMap::new(),
             repaired: 0,
             failed: 0,
             cancel,
             done_tx,
             done_rx,
-            events_on: events.is_some(),
             events,
-            _watcher: watcher,
+            watcher,
             rescan_flag,
             last_scan: Instant::now(),
             last_status: String::new(),
@@ -306,8 +343,11 @@ impl Daemon {
             last_ping: Instant::now(),
             stopping: None,
             cancelled: false,
+            errors: HashMap::new(),
+            folders_checked: None,
+            folders_ok: true,
         };
-        d.rescan(true);
+        d.rescan();
         tracing::info!(
             inbox = %d.layout.inbox.display(),
             outbox = %d.layout.outbox.display(),
@@ -315,6 +355,7 @@ impl Daemon {
             archive = %d.layout.archive.display(),
             workers = d.settings.workers,
             mode = if d.settings.poll { "poll" } else { "events" },
+            instance = %d.home.tag,
             "holefill watch ready: {} files waiting",
             d.pending.len() + d.again.len()
         );
@@ -381,7 +422,7 @@ impl Daemon {
                     || room
                     || now.duration_since(self.last_scan) >= every
                 {
-                    self.rescan(false);
+                    self.rescan();
                 }
                 self.dispatch();
             }
@@ -401,132 +442,302 @@ impl Daemon {
         Ok(())
     }
 
-    /// Lists the inbox and takes over dead daemons' files.
-    fn rescan(&mut self, startup: bool) {
-        self.last_scan = Instant::now();
-        for r in claim::recover(&self.layout, &self.id, startup) {
-            if self.working.contains(&r.name) || self.again.iter().any(|(j, _)| j.name == r.name) {
-                continue;
+    /// Logs `msg` as an error, at most once per [`ERROR_EVERY`] for `key`.
+    fn error_limited(&mut self, key: &str, msg: &str) {
+        let now = Instant::now();
+        match self.errors.get(key) {
+            Some(t) if now.duration_since(*t) < ERROR_EVERY => {
+                tracing::debug!("{msg}");
             }
-            if let Some(output) = &r.published {
-                self.finish_published(&r.name, output);
-                continue;
+            _ => {
+                tracing::error!("{msg} (repeated at most once a minute)");
+                self.errors.insert(key.to_string(), now);
             }
-            tracing::warn!(file = %r.name, attempts = r.sidecar.attempts, "recovered from a daemon that died while repairing it");
-            self.again.push_back((
-                Job {
-                    name: r.name,
-                    attempt: r.sidecar.attempts + 1,
-                    received: r.sidecar.received,
-                },
-                Instant::now(),
-            ));
         }
-        claim::clean_tmp(&self.layout, &self.id);
+    }
+
+    /// The error of `key` is over.
+    fn error_over(&mut self, key: &str, msg: &str) {
+        if self.errors.remove(key).is_some() {
+            tracing::info!("{msg}");
+        }
+    }
+
+    /// Checks that the folders are there (recreating the ones that vanished) and are
+    /// still what they were (not the inbox). At most every second unless `force`.
+    /// False while one cannot be had: then no file is claimed.
+    fn check_folders(&mut self, force: bool) -> bool {
+        let now = Instant::now();
+        if !force
+            && self
+                .folders_checked
+                .is_some_and(|t| now.duration_since(t) < FOLDER_CHECK)
+        {
+            return self.folders_ok;
+        }
+        self.folders_checked = Some(now);
+        let mut ok = true;
+        let layout = self.layout.clone();
+        for (what, p) in layout.named() {
+            let key = format!("folder:{what}");
+            match std::fs::symlink_metadata(p) {
+                Ok(m) if m.is_dir() => {
+                    self.error_over(&key, &format!("the {what} {} is back", p.display()))
+                }
+                Ok(_) => {
+                    ok = false;
+                    self.error_limited(&key, &format!("the {what} {} is not a folder any more (a file or a link in its place); no file is taken until it is one again", p.display()));
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                    match std::fs::create_dir_all(p) {
+                        Ok(()) => {
+                            tracing::warn!(
+                                "the {what} {} had vanished: created again",
+                                p.display()
+                            );
+                            if what == "inbox" {
+                                if let Some(w) = self.watcher.as_mut() {
+                                    if let Err(e) = w.rewatch() {
+                                        tracing::error!(
+                                            "cannot watch the inbox again: {e}; polling it"
+                                        );
+                                    }
+                                }
+                                self.rescan_flag.store(true, Ordering::SeqCst);
+                            }
+                        }
+                        Err(e) => {
+                            ok = false;
+                            self.error_limited(&key, &format!("the {what} {} vanished and cannot be created again: {e}; no file is taken until it can", p.display()));
+                        }
+                    }
+                }
+                Err(e) => {
+                    ok = false;
+                    self.error_limited(&key, &format!("the {what} {}: {e}", p.display()));
+                }
+            }
+        }
+        if ok {
+            if let Err(e) = self.layout.check_aliases() {
+                ok = false;
+                self.error_limited(
+                    "aliases",
+                    &format!("{e}; no file is taken until that changes"),
+                );
+            }
+        }
+        if ok {
+            for p in [
+                self.layout.processing_root.clone(),
+                self.layout.tmp_root.clone(),
+            ] {
+                if let Err(e) = claim::make_private_dir(&p, 0o755) {
+                    ok = false;
+                    self.error_limited(
+                        "private",
+                        &format!("{e}; no file is taken until that changes"),
+                    );
+                }
+            }
+        }
+        if ok && !self.home.intact() {
+            // our folder went (with the inbox): a new one; files in the old one, if any,
+            // are gone with it
+            match Home::create(&self.layout, &self.id.tag()) {
+                Ok(h) => {
+                    tracing::warn!(
+                        "this daemon's folder {} had vanished: created again",
+                        h.dir.display()
+                    );
+                    self.home = Arc::new(h);
+                }
+                Err(e) => {
+                    ok = false;
+                    self.error_limited(
+                        "home",
+                        &format!("cannot create this daemon's folder again: {e}"),
+                    );
+                }
+            }
+        }
+        if ok && !self.home.tmp.is_dir() {
+            use std::os::unix::fs::DirBuilderExt;
+            match std::fs::DirBuilder::new()
+                .mode(0o700)
+                .create(&self.home.tmp)
+            {
+                Ok(()) => {
+                    tracing::warn!(
+                        "the temporary folder {} had vanished: created again",
+                        self.home.tmp.display()
+                    );
+                    if let Err(e) = self.write_policy_snapshot() {
+                        ok = false;
+                        self.error_limited(
+                            "policy",
+                            &format!("cannot store the policy snapshot again: {e}"),
+                        );
+                    }
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+                Err(e) => {
+                    ok = false;
+                    self.error_limited(
+                        "tmp",
+                        &format!(
+                            "cannot create the temporary folder {}: {e}",
+                            self.home.tmp.display()
+                        ),
+                    );
+                }
+            }
+        }
+        self.folders_ok = ok;
+        ok
+    }
+
+    /// Writes the current policy snapshot again (its folder was recreated).
+    fn write_policy_snapshot(&mut self) -> Result<()> {
+        if let (Some(text), Some(path)) = (&self.policy_text, &self.ctx.policy) {
+            holefill::io::write_atomic(path, text.as_bytes())
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
+        }
+        Ok(())
+    }
+
+    /// Lists the inbox, adopts the folders of dead daemons, tidies up.
+    fn rescan(&mut self) {
+        self.last_scan = Instant::now();
+        self.adopt_dead();
+        claim::clean_staging(&self.layout);
+        claim::clean_tmp(&self.layout);
+        claim::ledger_clean(&self.layout);
         self.pending.overflowed = false;
-        self.expect_create.clear();
+        self.expect.clear();
         let now = Instant::now();
         match std::fs::read_dir(&self.layout.inbox) {
             Ok(rd) => {
                 for e in rd.flatten() {
-                    let Ok(name) = e.file_name().into_string() else {
-                        continue; // not UTF-8: cannot be named in a JSON log
-                    };
-                    if claim::is_candidate_name(&name)
-                        && e.file_type().map(|t| t.is_file()).unwrap_or(false)
-                    {
+                    let name = e.file_name();
+                    if claim::is_candidate_name(&name) && !e.file_type().is_ok_and(|t| t.is_dir()) {
                         self.pending.note(&name, Seen::Scan, now);
                     }
                 }
             }
-            Err(e) => tracing::error!("cannot list the inbox {}: {e}", self.layout.inbox.display()),
-        }
-    }
-
-    /// A recovered file whose model and log a dead daemon had already published: only
-    /// the original's archiving (or deletion) was left to do.
-    fn finish_published(&mut self, name: &str, output: &str) {
-        let src = self.layout.mine.join(name);
-        let r = match self.settings.on_success {
-            OnSuccess::Archive => {
-                fsops::move_into(&src, &self.layout.archive, name, &[]).map(|_| ())
-            }
-            OnSuccess::Delete => std::fs::remove_file(&src),
-        };
-        match r {
-            Ok(()) => {
-                let _ = std::fs::remove_file(self.layout.sidecar(name));
-                let _ = fsops::fsync_dir(&self.layout.mine);
-                self.repaired += 1;
-                tracing::info!(
-                    file = %name,
-                    status = "repaired",
-                    output = %output,
-                    "{name} repaired -> {output} (by a daemon that died before archiving the original; not repaired again)"
-                );
-            }
             Err(e) => {
-                tracing::error!(file = %name, "{name}: already repaired as {output}, but the original could not be archived: {e}")
+                let msg = format!("cannot list the inbox {}: {e}", self.layout.inbox.display());
+                self.error_limited("list", &msg);
             }
         }
     }
 
-    fn on_event(&mut self, ev: notify::Result<notify::Event>) {
-        use notify::event::{AccessKind, AccessMode, EventKind, ModifyKind, RenameMode};
-        let ev = match ev {
-            Ok(ev) => ev,
-            Err(e) => {
-                tracing::warn!("watcher error (rescanning): {e}");
-                self.rescan_flag.store(true, Ordering::SeqCst);
-                self.pending.forget_events();
-                return;
-            }
+    /// Takes over the folders of daemons that died (their lock is free).
+    fn adopt_dead(&mut self) {
+        let Ok(rd) = std::fs::read_dir(&self.layout.processing_root) else {
+            return;
         };
-        if ev.need_rescan() {
-            self.rescan_flag.store(true, Ordering::SeqCst);
-            self.pending.forget_events();
+        let tags: Vec<String> = rd
+            .flatten()
+            .filter_map(|e| e.file_name().into_string().ok())
+            .filter(|t| !t.starts_with('.'))
+            .filter(|t| *t != self.home.tag && !self.adopted.iter().any(|h| h.tag == *t))
+            .collect();
+        for tag in tags {
+            match Home::adopt(&self.layout, &tag) {
+                Ok(Some(h)) => {
+                    let h = Arc::new(h);
+                    let jobs = claim::jobs_of(&h, &self.id);
+                    if jobs.is_empty() {
+                        if !h.remove_if_empty() {
+                            tracing::warn!("{}: a dead daemon's folder with files that are not jobs; left alone", h.dir.display());
+                        }
+                        continue;
+                    }
+                    tracing::warn!(
+                        "taking over {} files of a daemon that died ({})",
+                        jobs.len(),
+                        h.dir.display()
+                    );
+                    for job in jobs {
+                        match &job.rec.phase {
+                            Phase::Claimed => {
+                                tracing::warn!(file = %job.shown(), attempts = job.rec.attempts, "{}: recovered from a daemon that died while repairing it", job.shown())
+                            }
+                            _ => {
+                                tracing::warn!(file = %job.shown(), "{}: recovered from a daemon that died while publishing it; finishing that (not repaired again)", job.shown())
+                            }
+                        }
+                        self.again.push_back((job, Instant::now()));
+                    }
+                    self.adopted.push(h);
+                }
+                Ok(None) => {}
+                Err(msg) => {
+                    self.error_limited(
+                        &format!("foreign:{tag}"),
+                        &format!("{msg}; its files are left alone"),
+                    );
+                }
+            }
         }
+    }
+
+    /// Releases the adopted folders whose jobs are all done.
+    fn release_adopted(&mut self) {
+        let busy = |tag: &str, d: &Daemon| {
+            d.working.values().any(|(t, _)| t == tag)
+                || d.again.iter().any(|(j, _)| j.home.tag == tag)
+        };
+        let mut keep = Vec::new();
+        for h in std::mem::take(&mut self.adopted) {
+            if busy(&h.tag, self) || !h.remove_if_empty() {
+                keep.push(h);
+            }
+        }
+        self.adopted = keep;
+    }
+
+    fn on_event(&mut self, ev: Ev) {
         let now = Instant::now();
-        let inbox = &self.layout.inbox;
-        let name_of = |p: &PathBuf| -> Option<String> {
-            (p.parent() == Some(inbox.as_path()))
-                .then(|| p.file_name()?.to_str().map(str::to_string))
-                .flatten()
-        };
-        let names: Vec<Option<String>> = ev.paths.iter().map(name_of).collect();
-        let mut note = |i: usize, seen: Seen| {
-            if let Some(Some(n)) = names.get(i) {
-                self.pending.note(n, seen, now);
-            }
-        };
-        match ev.kind {
-            EventKind::Create(_) => {
-                if let Some(Some(n)) = names.first() {
-                    if self.expect_create.remove(n) {
-                        return;
+        match ev {
+            Ev::File(name, seen) => {
+                if seen == Seen::RenamedIn {
+                    if let Some(ours) = self.expect.remove(&name) {
+                        // our own put-back: its state was noted when it was put back
+                        if ours == Seen::Changed {
+                            return;
+                        }
                     }
                 }
-                note(0, Seen::Created)
+                self.pending.note(&name, seen, now);
             }
-            EventKind::Modify(ModifyKind::Name(RenameMode::To)) => note(0, Seen::RenamedIn),
-            EventKind::Modify(ModifyKind::Name(RenameMode::From)) => note(0, Seen::Removed),
-            EventKind::Modify(ModifyKind::Name(RenameMode::Both)) => {
-                note(0, Seen::Removed);
-                note(1, Seen::RenamedIn);
+            Ev::Overflow => {
+                tracing::warn!("the inbox's change events overflowed: rescanning");
+                self.rescan_flag.store(true, Ordering::SeqCst);
+                self.pending.forget_events();
             }
-            EventKind::Modify(ModifyKind::Name(_)) => {
-                self.rescan_flag.store(true, Ordering::SeqCst)
+            Ev::InboxGone => {
+                self.check_folders(true);
             }
-            EventKind::Modify(ModifyKind::Metadata(_)) => note(0, Seen::Created),
-            EventKind::Modify(_) => note(0, Seen::Written),
-            EventKind::Access(AccessKind::Close(AccessMode::Write)) => note(0, Seen::Closed),
-            EventKind::Remove(_) => note(0, Seen::Removed),
-            _ => {}
+            Ev::Error(e) => {
+                tracing::error!(
+                    "the inbox's change events failed ({e}); rescanning every {} s",
+                    self.settings.rescan.as_secs()
+                );
+                self.pending.forget_events();
+            }
         }
     }
 
-    /// Claims complete files while fewer than `workers` repairs run.
+    /// Claims ready files while fewer than `workers` repairs run.
     fn dispatch(&mut self) {
+        if self.working.len() >= self.settings.workers {
+            return;
+        }
+        if !self.check_folders(false) {
+            return;
+        }
         while self.working.len() < self.settings.workers {
             let now = Instant::now();
             if let Some(pos) = self.again.iter().position(|(_, t)| *t <= now) {
@@ -535,48 +746,55 @@ impl Daemon {
                 }
                 continue;
             }
-            let Some((name, received)) =
-                self.pending
-                    .take_ready(&self.layout.inbox, self.settings.settle, now)
-            else {
+            let Some(r) = self.pending.take_ready(
+                &self.layout.inbox,
+                self.settings.settle,
+                self.settings.max_wait,
+                now,
+            ) else {
                 break;
             };
-            match claim::claim(&self.layout, &name) {
-                Ok(Some(_)) => {
-                    tracing::debug!(file = %name, "claimed");
-                    self.spawn(Job {
-                        name,
-                        attempt: 1,
-                        received: fsops::rfc3339(received),
-                    });
+            if r.waited_out {
+                tracing::warn!(file = %shown(&r.name), "{}: taken after max_wait_secs = {} s without a change, though {}", shown(&r.name), self.settings.max_wait.as_secs(), if r.stamp.size == 0 { "empty" } else { "still held open" });
+            }
+            match claim::claim(
+                &self.layout,
+                &self.home,
+                self.id.next_id(),
+                &r.name,
+                r.stamp,
+                r.received,
+            ) {
+                Ok(Some(job)) => {
+                    tracing::debug!(file = %job.shown(), id = %job.id, "claimed");
+                    self.ctx.hooks.at("claimed", &job.name);
+                    self.spawn(job);
                 }
                 Ok(None) => {}
-                Err(e) if fsops::is_disk_full(&e) => {
-                    tracing::warn!(file = %name, "cannot claim (disk full), later: {e}");
-                    self.pending.note(&name, Seen::RenamedIn, now);
-                    self.pending.defer(&name, now + Duration::from_secs(5));
+                Err(e) => {
+                    tracing::warn!(file = %shown(&r.name), "cannot claim {}: {e}; later", shown(&r.name));
+                    self.pending.note(&r.name, Seen::RenamedIn, now);
+                    self.pending.defer(&r.name, now + Duration::from_secs(5));
+                    self.folders_checked = None;
                     break;
                 }
-                Err(e) => tracing::warn!(file = %name, "cannot claim: {e}"),
             }
         }
     }
 
     fn spawn(&mut self, job: Job) {
-        self.working.insert(job.name.clone());
+        self.working
+            .insert(job.id.clone(), (job.home.tag.clone(), job.shown()));
         let ctx = self.ctx.clone();
         let cancel = self.cancel.subscribe();
         let tx = self.done_tx.clone();
-        let name = job.name.clone();
         tokio::spawn(async move {
-            let h = tokio::spawn(worker::process(ctx, job, cancel));
-            let done = match h.await {
-                Ok(Done::Stranded { name: n, error }) if n.is_empty() => {
-                    Done::Stranded { name, error }
-                }
+            let kept = job.clone();
+            let done = match tokio::spawn(worker::process(ctx, job, cancel)).await {
                 Ok(d) => d,
-                Err(e) => Done::Stranded {
-                    name,
+                // a bug, not the file's fault: it stays where it is and is tried again
+                Err(e) => Done::Later {
+                    job: kept,
                     error: format!("internal error: {e}"),
                 },
             };
@@ -585,18 +803,26 @@ impl Daemon {
     }
 
     fn on_done(&mut self, done: Done) {
-        self.working.remove(done.name());
+        self.working.remove(&done.job().id);
         match done {
             Done::Repaired {
-                name,
+                job,
                 output,
                 filled,
                 skipped,
                 failed,
                 secs,
+                resumed,
             } => {
                 self.repaired += 1;
-                self.retries.remove(&name);
+                self.retries.remove(&job.name);
+                let name = job.shown();
+                let output = shown(OsStr::new(&output));
+                let how = if resumed {
+                    " (published for a daemon that died after repairing it; not repaired again)"
+                } else {
+                    ""
+                };
                 tracing::info!(
                     file = %name,
                     status = "repaired",
@@ -605,17 +831,18 @@ impl Daemon {
                     skipped,
                     holes_failed = failed,
                     secs,
-                    "{name} repaired -> {output}: holes {filled} filled, {skipped} skipped, {failed} failed; {secs:.2} s"
+                    "{name} repaired -> {output}: holes {filled} filled, {skipped} skipped, {failed} failed; {secs:.2} s{how}"
                 );
             }
             Done::Failed {
-                name,
+                job,
                 stage,
                 error,
                 secs,
             } => {
                 self.failed += 1;
-                self.retries.remove(&name);
+                self.retries.remove(&job.name);
+                let name = job.shown();
                 tracing::warn!(
                     file = %name,
                     status = "failed",
@@ -626,7 +853,7 @@ impl Daemon {
                 );
             }
             Done::Again { job, error } => {
-                tracing::warn!(file = %job.name, attempt = job.attempt, "{}: attempt {} of {} failed: {error}", job.name, job.attempt, self.settings.max_attempts);
+                tracing::warn!(file = %job.shown(), attempt = job.attempt, "{}: attempt {} of {} failed: {error}", job.shown(), job.attempt, self.settings.max_attempts);
                 let next = Job {
                     attempt: job.attempt + 1,
                     ..job
@@ -638,16 +865,48 @@ impl Daemon {
                     self.put_back_waiting();
                 }
             }
+            Done::Later { mut job, error } => {
+                let now = Instant::now();
+                let name = job.shown();
+                if job
+                    .warned
+                    .is_none_or(|t| now.duration_since(t) >= ERROR_EVERY)
+                {
+                    tracing::error!(file = %name, "{name}: {error}; it waits in {} and is tried again", job.home.dir.display());
+                    job.warned = Some(now);
+                } else {
+                    tracing::debug!(file = %name, "{name}: {error}");
+                }
+                self.folders_checked = None;
+                let delay = if self.stopping.is_some() {
+                    Duration::ZERO
+                } else {
+                    Duration::from_secs(5)
+                };
+                self.again.push_back((job, now + delay));
+                if self.stopping.is_some() {
+                    self.put_back_waiting();
+                }
+            }
             Done::PutBack {
-                name,
+                job,
                 inbox_name,
                 error,
+                changed,
             } => {
-                if self.events_on {
-                    self.expect_create.insert(inbox_name.clone());
+                let name = job.shown();
+                let back = shown(&inbox_name);
+                let now = Instant::now();
+                if self.watcher.is_some() && changed {
+                    self.expect.insert(inbox_name.clone(), Seen::Changed);
                 }
                 if self.stopping.is_some() {
-                    tracing::info!(file = %name, "put back into the inbox as {inbox_name}");
+                    tracing::info!(file = %name, "{name}: put back into the inbox as {back}");
+                    return;
+                }
+                if changed {
+                    tracing::warn!(file = %name, "{name}: {}; back in the inbox as {back}", error.as_deref().unwrap_or("changed"));
+                    self.pending.note(&inbox_name, Seen::Changed, now);
                     return;
                 }
                 let n = self.retries.entry(inbox_name.clone()).or_insert(0);
@@ -656,18 +915,19 @@ impl Daemon {
                     Duration::from_secs(1u64 << (*n - 1).min(20)).min(self.settings.retry_max);
                 tracing::warn!(
                     file = %name,
-                    "{name}: {}; back in the inbox as {inbox_name}, retry in {} s",
+                    "{name}: {}; back in the inbox as {back}, retry in {} s",
                     error.as_deref().unwrap_or("put back"),
                     delay.as_secs()
                 );
-                let now = Instant::now();
                 self.pending.note(&inbox_name, Seen::RenamedIn, now);
                 self.pending.defer(&inbox_name, now + delay);
+                self.folders_checked = None;
             }
-            Done::Stranded { name, error } => {
-                tracing::error!(file = %name, "{name}: {error}; it stays in {}", self.layout.mine.display());
+            Done::Gone { job, error } => {
+                tracing::error!(file = %job.shown(), "{}: {error}; nothing left to do for it", job.shown());
             }
         }
+        self.release_adopted();
     }
 
     fn begin_stop(&mut self, why: &str) {
@@ -697,13 +957,20 @@ impl Daemon {
         self.put_back_waiting();
     }
 
-    /// Puts the files waiting for another attempt back into the inbox (at shutdown).
+    /// At shutdown: puts the waiting jobs that are only claimed back into the inbox
+    /// (their failed attempts recorded); jobs further on stay for the next daemon.
     fn put_back_waiting(&mut self) {
         while let Some((job, _)) = self.again.pop_front() {
-            match claim::put_back(&self.layout, &job.name) {
-                Ok(n) => tracing::info!(file = %job.name, "put back into the inbox as {n}"),
-                Err(e) => {
-                    tracing::error!(file = %job.name, "cannot put back into the inbox: {e}; it stays in {}", self.layout.mine.display())
+            let name = job.shown();
+            match worker::put_back_waiting(&self.ctx, &job) {
+                Some(Ok(n)) => {
+                    tracing::info!(file = %name, "{name}: put back into the inbox as {}", shown(&n))
+                }
+                Some(Err(e)) => {
+                    tracing::error!(file = %name, "{name}: cannot put back into the inbox: {e}; it stays in {}", job.home.dir.display())
+                }
+                None => {
+                    tracing::warn!(file = %name, "{name}: left in {} for the next daemon to finish", job.home.dir.display())
                 }
             }
         }
@@ -741,7 +1008,7 @@ impl Daemon {
             tracing::error!("SIGHUP: the config is refused, the old one kept: {e:#}");
             return;
         }
-        let policy = match snapshot_policy(&new, &self.layout.tmp, self.generation + 1) {
+        let (policy, text) = match snapshot_policy(&new, &self.home.tmp, self.generation + 1) {
             Ok(p) => p,
             Err(e) => {
                 tracing::error!("SIGHUP: the policy is refused, the old one kept: {e:#}");
@@ -749,6 +1016,7 @@ impl Daemon {
             }
         };
         self.generation += 1;
+        self.policy_text = text;
         self.ctx = Arc::new(RunCtx {
             settings: new.clone(),
             policy,
@@ -756,6 +1024,7 @@ impl Daemon {
             layout: self.ctx.layout.clone(),
             host: self.ctx.host.clone(),
             pid: self.ctx.pid,
+            instance: self.ctx.instance.clone(),
             exe: self.ctx.exe.clone(),
             hooks: self.ctx.hooks.clone(),
             cores: self.ctx.cores,
@@ -766,24 +1035,15 @@ impl Daemon {
 
     fn shutdown(&mut self) {
         self.put_back_waiting();
-        let _ = std::fs::remove_dir_all(&self.layout.tmp);
-        // our folder: stranded files stay (a later daemon recovers them)
-        if let Ok(rd) = std::fs::read_dir(&self.layout.mine) {
-            for e in rd.flatten() {
-                let n = e.file_name().to_string_lossy().into_owned();
-                let file = n
-                    .strip_prefix('.')
-                    .and_then(|s| s.strip_suffix(".holefill.json"));
-                if let Some(f) = file {
-                    if !self.layout.mine.join(f).exists() {
-                        let _ = std::fs::remove_file(e.path());
-                    }
-                }
+        for h in std::iter::once(self.home.clone()).chain(self.adopted.drain(..)) {
+            if !h.remove_if_empty() {
+                tracing::warn!(
+                    "files remain in {}: the next daemon finishes them",
+                    h.dir.display()
+                );
             }
         }
-        if std::fs::remove_dir(&self.layout.mine).is_err() {
-            tracing::warn!("files remain in {}", self.layout.mine.display());
-        }
+        claim::ledger_clean(&self.layout);
         let _ = fsops::fsync_dir(&self.layout.inbox);
         tracing::info!(
             repaired = self.repaired,

@@ -1,17 +1,28 @@
 //! The files waiting in the inbox, and when each is complete enough to take.
 //!
-//! A file renamed in (an `IN_MOVED_TO` event) is complete at once. A file written in
-//! place is taken only when its writer has closed it (close-write event, where the
-//! platform reports one) and its size and modification time have not changed for the
-//! settle time. A file found by a scan (start-up, timer, overflow, polling) with no
-//! event is judged by size and modification time alone: taken once its modification
-//! time is older than the settle time and its size stays put. A create or write event
-//! not followed by close-write (a writer that holds the file open) blocks it, for at
-//! most ten settle times of silence (a `link(2)` into the inbox gives a create event and
-//! no close).
+//! A file is taken only when nobody holds it open and it has stopped changing:
+//! - the inotify events count its opens (`IN_OPEN`) and closes (`IN_CLOSE_WRITE`,
+//!   `IN_CLOSE_NOWRITE`); a write (`IN_MODIFY`) by a writer whose open was not seen
+//!   counts as an open until its close. While the count is above zero the file waits;
+//! - a file renamed into the inbox (`IN_MOVED_TO`) is complete at once; any other
+//!   (created or written in place, or found by a scan with no event) once its size and
+//!   modification time have not changed, and no event came, for the settle time;
+//! - an empty file waits: a producer may create it first and write it later.
+//!
+//! The wait has a bound, `max_wait`: a file still held open, or still empty, after
+//! that long without any change is taken anyway (an empty one then goes to the failed
+//! folder as empty). Events lost to a queue overflow, and files already open when the
+//! daemon started, cannot be counted: those files are judged by the settle time alone.
+//! The daemon compares the file's identity, size and modification time when it claims
+//! it and again after the repair, and puts it back to wait if it changed.
+//!
+//! Memory is bounded: at most `cap` names are remembered (later rescans find the
+//! rest), and the order list is compacted when names leave it.
 
 use super::claim::is_candidate_name;
-use std::collections::{HashMap, VecDeque};
+use super::fsops::Stamp;
+use std::collections::{HashMap, HashSet, VecDeque};
+use std::ffi::{OsStr, OsString};
 use std::fs;
 use std::path::Path;
 use std::time::{Duration, Instant, SystemTime};
@@ -21,14 +32,22 @@ use std::time::{Duration, Instant, SystemTime};
 pub enum Seen {
     /// Listed by a scan.
     Scan,
-    /// Created (or linked) in place: complete once quiet for the settle time.
+    /// Created (or linked) in place.
     Created,
-    /// Written in place (open for writing until closed).
-    Written,
+    /// Opened (for reading or writing).
+    Opened,
+    /// Written.
+    Modified,
     /// Closed after writing.
-    Closed,
+    ClosedWrite,
+    /// Closed, not written.
+    ClosedRead,
+    /// Its attributes changed (chmod, touch).
+    Attrib,
     /// Renamed (or put back) into the inbox: complete.
     RenamedIn,
+    /// Put back by the daemon because it changed while claimed: judge it afresh.
+    Changed,
     /// Gone from the inbox.
     Removed,
 }
@@ -37,19 +56,32 @@ pub enum Seen {
 struct Entry {
     received: SystemTime,
     renamed_in: bool,
-    open_write: bool,
-    /// The last create/write/close/rename event (`None`: only seen by scans).
+    /// Opens seen and not yet closed.
+    opens: u32,
+    /// The last event that may have changed it (`None`: only seen by scans).
     last_event: Option<Instant>,
-    stat: Option<(u64, SystemTime)>,
+    stat: Option<Stamp>,
     stable_since: Instant,
     not_before: Option<Instant>,
+}
+
+/// A file ready to be claimed.
+#[derive(Clone, Debug)]
+pub struct Ready {
+    pub name: OsString,
+    /// When it was first seen.
+    pub received: SystemTime,
+    /// Identity, size and modification time as judged now.
+    pub stamp: Stamp,
+    /// Taken at the `max_wait` bound (still open, or empty), not because complete.
+    pub waited_out: bool,
 }
 
 /// The waiting files, oldest first, at most `cap` of them.
 #[derive(Debug)]
 pub struct Pending {
-    order: VecDeque<String>,
-    map: HashMap<String, Entry>,
+    order: VecDeque<OsString>,
+    map: HashMap<OsString, Entry>,
     cap: usize,
     /// Names refused because the set was full (a rescan is due once there is room).
     pub overflowed: bool,
@@ -69,13 +101,33 @@ impl Pending {
         self.map.len()
     }
 
+    /// Length of the order list (for tests of its bound).
+    #[cfg(test)]
+    fn order_len(&self) -> usize {
+        self.order.len()
+    }
+
+    /// Keeps the order list within twice the set (plus a little): names that left the
+    /// set, and repeats, are dropped.
+    fn compact(&mut self) {
+        if self.order.len() <= 2 * self.map.len() + 64 {
+            return;
+        }
+        let mut seen = HashSet::with_capacity(self.map.len());
+        let map = &self.map;
+        self.order
+            .retain(|n| map.contains_key(n) && seen.insert(n.clone()));
+        self.order.shrink_to(2 * self.map.len() + 64);
+    }
+
     /// Records what was seen of `name` (ignored unless it is a mesh file name).
-    pub fn note(&mut self, name: &str, seen: Seen, now: Instant) {
+    pub fn note(&mut self, name: &OsStr, seen: Seen, now: Instant) {
         if !is_candidate_name(name) {
             return;
         }
         if seen == Seen::Removed {
             self.map.remove(name);
+            self.compact();
             return;
         }
         if !self.map.contains_key(name) {
@@ -83,13 +135,14 @@ impl Pending {
                 self.overflowed = true;
                 return;
             }
-            self.order.push_back(name.to_string());
+            self.order.push_back(name.to_owned());
+            self.compact();
             self.map.insert(
-                name.to_string(),
+                name.to_owned(),
                 Entry {
                     received: SystemTime::now(),
                     renamed_in: false,
-                    open_write: false,
+                    opens: 0,
                     last_event: None,
                     stat: None,
                     stable_since: now,
@@ -106,45 +159,58 @@ impl Pending {
                 e.renamed_in = false;
                 e.last_event = Some(now);
             }
-            Seen::Written => {
-                e.open_write = true;
+            Seen::Opened => e.opens = e.opens.saturating_add(1),
+            Seen::Modified => {
+                // a writer we did not see open (before the daemon started, or lost
+                // events) holds it open until its close
+                e.opens = e.opens.max(1);
                 e.renamed_in = false;
                 e.last_event = Some(now);
             }
-            Seen::Closed => {
-                e.open_write = false;
+            Seen::ClosedWrite => {
+                e.opens = e.opens.saturating_sub(1);
                 e.last_event = Some(now);
             }
+            Seen::ClosedRead => e.opens = e.opens.saturating_sub(1),
+            Seen::Attrib => e.last_event = Some(now),
             Seen::RenamedIn => {
-                e.open_write = false;
+                e.opens = 0;
                 e.renamed_in = true;
+                e.last_event = Some(now);
+            }
+            Seen::Changed => {
+                e.opens = 0;
+                e.renamed_in = false;
+                e.stat = None;
+                e.stable_since = now;
                 e.last_event = Some(now);
             }
         }
     }
 
     /// Do not take `name` before `at` (back-off after a retryable failure).
-    pub fn defer(&mut self, name: &str, at: Instant) {
+    pub fn defer(&mut self, name: &OsStr, at: Instant) {
         if let Some(e) = self.map.get_mut(name) {
             e.not_before = Some(at);
         }
     }
 
-    /// Events may have been lost: forget what they said (judge by stat alone).
+    /// Events may have been lost: forget the open counts (judge by stat alone).
     pub fn forget_events(&mut self) {
         for e in self.map.values_mut() {
-            e.open_write = false;
+            e.opens = 0;
         }
     }
 
-    /// The oldest waiting file that is complete, removed from the set; names that are no
-    /// longer in the inbox are dropped on the way. `received` is when it was first seen.
+    /// The oldest waiting file that is ready, removed from the set; names that are no
+    /// longer in the inbox are dropped on the way.
     pub fn take_ready(
         &mut self,
         inbox: &Path,
         settle: Duration,
+        max_wait: Duration,
         now: Instant,
-    ) -> Option<(String, SystemTime)> {
+    ) -> Option<Ready> {
         let mut i = 0;
         while i < self.order.len() {
             let name = self.order[i].clone();
@@ -156,59 +222,67 @@ impl Pending {
                 i += 1;
                 continue;
             }
-            // cannot be ready yet whatever its stat says: spare the system call (a
-            // change is caught by the stat at the moment it could be taken)
             let quiet = e
                 .last_event
                 .map_or(Duration::MAX, |t| now.saturating_duration_since(t));
-            let complete = e.renamed_in && !e.open_write;
-            let too_soon = e.stat.is_some()
-                && !complete
-                && ((e.open_write && quiet < settle * 10)
-                    || now.saturating_duration_since(e.stable_since) < settle
-                    || quiet < settle);
-            if too_soon {
-                i += 1;
-                continue;
+            // cannot be ready yet whatever its stat says: spare the system call (a
+            // change is caught by the stat at the moment it could be taken)
+            if e.stat.is_some() {
+                let stable = now.saturating_duration_since(e.stable_since);
+                let too_soon = if e.opens > 0 {
+                    quiet.min(stable) < max_wait
+                } else {
+                    !e.renamed_in && (stable < settle || quiet < settle)
+                };
+                if too_soon {
+                    i += 1;
+                    continue;
+                }
             }
             let md = match fs::symlink_metadata(inbox.join(&name)) {
-                Ok(m) if m.is_file() => m,
+                Ok(m) if !m.is_dir() => m,
                 _ => {
-                    // gone (taken by another daemon, removed) or not a regular file
+                    // gone (taken by another daemon, removed), or a directory (never
+                    // taken)
                     self.map.remove(&name);
                     self.order.remove(i);
                     continue;
                 }
             };
-            let mtime = md.modified().unwrap_or(SystemTime::UNIX_EPOCH);
-            let st = (md.len(), mtime);
+            let st = Stamp::of(&md);
             if e.stat != Some(st) {
                 let first = e.stat.is_none();
                 e.stat = Some(st);
                 e.stable_since = if first {
                     // already unchanged for as long as its modification time says
+                    let mtime = md.modified().unwrap_or(SystemTime::UNIX_EPOCH);
                     let age = SystemTime::now().duration_since(mtime).unwrap_or_default();
-                    now.checked_sub(age.min(settle)).unwrap_or(now)
+                    now.checked_sub(age.min(max_wait.max(settle)))
+                        .unwrap_or(now)
                 } else {
                     now
                 };
             }
-            let quiet = e
-                .last_event
-                .map_or(Duration::MAX, |t| now.saturating_duration_since(t));
             let stable = now.saturating_duration_since(e.stable_since);
-            let ready = if e.renamed_in && !e.open_write {
-                true
-            } else if e.open_write && quiet < settle * 10 {
-                false
+            let empty = md.is_file() && md.len() == 0;
+            let (ready, waited_out) = if e.opens > 0 || empty {
+                let r = quiet.min(stable) >= max_wait;
+                (r, r)
+            } else if e.renamed_in {
+                (true, false)
             } else {
-                stable >= settle && quiet >= settle.min(stable)
+                (stable >= settle && quiet >= settle, false)
             };
             if ready {
                 let received = e.received;
                 self.map.remove(&name);
                 self.order.remove(i);
-                return Some((name, received));
+                return Some(Ready {
+                    name,
+                    received,
+                    stamp: st,
+                    waited_out,
+                });
             }
             i += 1;
         }
@@ -220,6 +294,16 @@ impl Pending {
 mod tests {
     use super::*;
 
+    fn os(s: &str) -> &OsStr {
+        OsStr::new(s)
+    }
+    const LONG: Duration = Duration::from_secs(3600);
+
+    fn take(p: &mut Pending, d: &Path, settle: Duration, t: Instant) -> Option<String> {
+        p.take_ready(d, settle, LONG, t)
+            .map(|r| r.name.to_string_lossy().into_owned())
+    }
+
     #[test]
     fn renamed_in_is_ready_at_once_written_in_place_after_settle_and_close() {
         let d = tempfile::tempdir().unwrap();
@@ -228,25 +312,72 @@ mod tests {
         let t = Instant::now();
         fs::write(d.path().join("a.obj"), "x").unwrap();
         fs::write(d.path().join("b.obj"), "x").unwrap();
-        p.note("a.obj", Seen::RenamedIn, t);
-        p.note("b.obj", Seen::Written, t);
-        p.note("c.part", Seen::Written, t);
+        p.note(os("a.obj"), Seen::RenamedIn, t);
+        p.note(os("b.obj"), Seen::Created, t);
+        p.note(os("b.obj"), Seen::Opened, t);
+        p.note(os("b.obj"), Seen::Modified, t);
+        p.note(os("c.part"), Seen::Modified, t);
         assert_eq!(p.len(), 2);
-        assert_eq!(
-            p.take_ready(d.path(), settle, t).map(|x| x.0),
-            Some("a.obj".into())
-        );
-        // b: open for writing
-        assert!(p.take_ready(d.path(), settle, t + settle * 2).is_none());
-        p.note("b.obj", Seen::Closed, t + settle * 2);
+        assert_eq!(take(&mut p, d.path(), settle, t).as_deref(), Some("a.obj"));
+        // b: open for writing, however long
+        assert!(take(&mut p, d.path(), settle, t + settle * 100).is_none());
+        p.note(os("b.obj"), Seen::ClosedWrite, t + settle * 100);
         assert!(
-            p.take_ready(d.path(), settle, t + settle * 2).is_none(),
+            take(&mut p, d.path(), settle, t + settle * 100).is_none(),
             "closed, but not quiet for the settle time"
         );
         assert_eq!(
-            p.take_ready(d.path(), settle, t + settle * 4).map(|x| x.0),
-            Some("b.obj".into())
+            take(&mut p, d.path(), settle, t + settle * 102).as_deref(),
+            Some("b.obj")
         );
+    }
+
+    #[test]
+    fn a_reader_holds_it_too_and_an_empty_file_waits() {
+        let d = tempfile::tempdir().unwrap();
+        let settle = Duration::from_millis(100);
+        let mut p = Pending::new(10);
+        let t = Instant::now();
+        fs::write(d.path().join("e.obj"), "").unwrap();
+        p.note(os("e.obj"), Seen::RenamedIn, t);
+        assert!(
+            take(&mut p, d.path(), settle, t + settle * 50).is_none(),
+            "empty"
+        );
+        fs::write(d.path().join("e.obj"), "v 0 0 0").unwrap();
+        p.note(os("e.obj"), Seen::Opened, t + settle * 51);
+        p.note(os("e.obj"), Seen::Modified, t + settle * 51);
+        assert!(
+            take(&mut p, d.path(), settle, t + settle * 60).is_none(),
+            "open"
+        );
+        p.note(os("e.obj"), Seen::ClosedWrite, t + settle * 60);
+        p.note(os("e.obj"), Seen::Opened, t + settle * 60); // a reader
+        assert!(take(&mut p, d.path(), settle, t + settle * 70).is_none());
+        p.note(os("e.obj"), Seen::ClosedRead, t + settle * 70);
+        // its new size is seen now: unchanged from here for the settle time
+        assert!(take(&mut p, d.path(), settle, t + settle * 72).is_none());
+        assert_eq!(
+            take(&mut p, d.path(), settle, t + settle * 74).as_deref(),
+            Some("e.obj")
+        );
+    }
+
+    #[test]
+    fn the_wait_is_bounded() {
+        let d = tempfile::tempdir().unwrap();
+        let settle = Duration::from_millis(100);
+        let max_wait = Duration::from_secs(2);
+        let mut p = Pending::new(10);
+        let t = Instant::now();
+        fs::write(d.path().join("e.obj"), "").unwrap();
+        p.note(os("e.obj"), Seen::Created, t);
+        assert!(p.take_ready(d.path(), settle, max_wait, t).is_none());
+        let r = p
+            .take_ready(d.path(), settle, max_wait, t + max_wait * 2)
+            .unwrap();
+        assert!(r.waited_out);
+        assert_eq!(r.stamp.size, 0);
     }
 
     #[test]
@@ -256,31 +387,51 @@ mod tests {
         let mut p = Pending::new(10);
         let t = Instant::now();
         fs::write(d.path().join("a.obj"), "x").unwrap();
-        p.note("a.obj", Seen::Scan, t);
+        p.note(os("a.obj"), Seen::Scan, t);
         // just written: its modification time is recent
-        assert!(p.take_ready(d.path(), settle, t).is_none());
+        assert!(take(&mut p, d.path(), settle, t).is_none());
         // it grows
         fs::write(d.path().join("a.obj"), "xy").unwrap();
         let t2 = t + settle;
-        assert!(p.take_ready(d.path(), settle, t2).is_none());
-        assert!(p.take_ready(d.path(), settle, t2 + settle / 2).is_none());
+        assert!(take(&mut p, d.path(), settle, t2).is_none());
+        assert!(take(&mut p, d.path(), settle, t2 + settle / 2).is_none());
         assert_eq!(
-            p.take_ready(d.path(), settle, t2 + settle * 2).map(|x| x.0),
-            Some("a.obj".into())
+            take(&mut p, d.path(), settle, t2 + settle * 2).as_deref(),
+            Some("a.obj")
         );
     }
 
     #[test]
-    fn gone_files_are_dropped_and_the_cap_holds() {
+    fn gone_files_are_dropped_and_the_bounds_hold() {
         let d = tempfile::tempdir().unwrap();
         let mut p = Pending::new(2);
         let t = Instant::now();
         for n in ["a.obj", "b.obj", "c.obj"] {
-            p.note(n, Seen::RenamedIn, t);
+            p.note(os(n), Seen::RenamedIn, t);
         }
         assert_eq!(p.len(), 2);
         assert!(p.overflowed);
-        assert!(p.take_ready(d.path(), Duration::ZERO, t).is_none());
+        assert!(take(&mut p, d.path(), Duration::ZERO, t).is_none());
+        assert_eq!(p.len(), 0);
+        // names that come and go never pile up in the order list
+        let mut p = Pending::new(100);
+        for i in 0..100_000 {
+            let n = format!("f{i}.obj");
+            p.note(os(&n), Seen::Created, t);
+            p.note(os(&n), Seen::Removed, t);
+        }
+        assert_eq!(p.len(), 0);
+        assert!(p.order_len() <= 64, "{}", p.order_len());
+    }
+
+    #[test]
+    fn directories_are_never_taken() {
+        let d = tempfile::tempdir().unwrap();
+        fs::create_dir(d.path().join("dir.obj")).unwrap();
+        let mut p = Pending::new(10);
+        let t = Instant::now();
+        p.note(os("dir.obj"), Seen::Changed, t);
+        assert!(take(&mut p, d.path(), Duration::ZERO, t + LONG).is_none());
         assert_eq!(p.len(), 0);
     }
 
@@ -290,11 +441,9 @@ mod tests {
         fs::write(d.path().join("a.obj"), "x").unwrap();
         let mut p = Pending::new(2);
         let t = Instant::now();
-        p.note("a.obj", Seen::RenamedIn, t);
-        p.defer("a.obj", t + Duration::from_secs(5));
-        assert!(p.take_ready(d.path(), Duration::ZERO, t).is_none());
-        assert!(p
-            .take_ready(d.path(), Duration::ZERO, t + Duration::from_secs(6))
-            .is_some());
+        p.note(os("a.obj"), Seen::RenamedIn, t);
+        p.defer(os("a.obj"), t + Duration::from_secs(5));
+        assert!(take(&mut p, d.path(), Duration::ZERO, t).is_none());
+        assert!(take(&mut p, d.path(), Duration::ZERO, t + Duration::from_secs(6)).is_some());
     }
 }

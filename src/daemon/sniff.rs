@@ -5,58 +5,97 @@
 //! say (the worker then reads it; a malformed file fails there).
 
 use std::fs::File;
-use std::io::{BufRead, BufReader, Read};
-use std::path::Path;
+use std::io::{BufRead, BufReader, Read, Seek, SeekFrom};
 
-/// The number of faces `path` declares, when it can be told cheaply.
-pub fn declared_faces(path: &Path) -> Option<u64> {
-    let lower = path.file_name()?.to_str()?.to_ascii_lowercase();
-    let f = File::open(path).ok()?;
+/// Bytes of a line looked at; the rest of a longer line is skipped unread into memory
+/// (header lines are short; a file of one endless line costs no memory).
+const LINE_PREFIX: usize = 4096;
+
+/// The number of faces the open file `f` (named `name`, for its extension) declares,
+/// when it can be told cheaply. Reads from the start, through its own offset.
+pub fn declared_faces(f: &File, name: &str) -> Option<u64> {
+    let lower = name.to_ascii_lowercase();
+    let mut f = f.try_clone().ok()?;
+    f.seek(SeekFrom::Start(0)).ok()?;
+    let len = f.metadata().ok()?.len();
+    let r = BufReader::new(f);
     if lower.ends_with(".ply") {
-        ply(BufReader::new(f))
+        ply(r)
     } else if lower.ends_with(".off") {
-        off(BufReader::new(f))
+        off(r)
     } else if lower.ends_with(".stl") {
-        let len = f.metadata().ok()?.len();
-        stl(BufReader::new(f), len)
+        stl(r, len)
     } else if lower.ends_with(".obj") {
-        obj(BufReader::new(f))
+        obj(r)
     } else {
         None
     }
 }
 
-/// Lines as bytes (lossy), at most `max` bytes each, stopping at the first read error.
-fn lines<R: BufRead>(r: R) -> impl Iterator<Item = Vec<u8>> {
-    r.split(b'\n').map_while(Result::ok)
+/// Calls `f` with the first [`LINE_PREFIX`] bytes of each line (without the newline)
+/// until it returns false or the input ends (or fails). Memory: one prefix.
+fn for_each_line<R: BufRead>(mut r: R, mut f: impl FnMut(&[u8]) -> bool) {
+    let mut line: Vec<u8> = Vec::with_capacity(256);
+    loop {
+        let buf = match r.fill_buf() {
+            Ok(b) if !b.is_empty() => b,
+            _ => break,
+        };
+        let (chunk, end) = match memchr::memchr(b'\n', buf) {
+            Some(i) => (&buf[..i], Some(i + 1)),
+            None => (buf, None),
+        };
+        let room = LINE_PREFIX.saturating_sub(line.len());
+        line.extend_from_slice(&chunk[..chunk.len().min(room)]);
+        let used = end.unwrap_or(buf.len());
+        r.consume(used);
+        if end.is_some() {
+            if !f(&line) {
+                return;
+            }
+            line.clear();
+        }
+    }
+    if !line.is_empty() {
+        f(&line);
+    }
 }
 
 fn ply<R: BufRead>(r: R) -> Option<u64> {
-    for (i, line) in lines(r).enumerate() {
+    let mut out = None;
+    let mut i = 0;
+    for_each_line(r, |line| {
+        i += 1;
         if i > 10_000 {
-            return None;
+            return false;
         }
-        let s = String::from_utf8_lossy(&line);
+        let s = String::from_utf8_lossy(line);
         let mut t = s.split_whitespace();
         match (t.next(), t.next(), t.next()) {
-            (Some("element"), Some("face"), Some(n)) => return n.parse().ok(),
-            (Some("end_header"), _, _) => return None,
-            _ => {}
+            (Some("element"), Some("face"), Some(n)) => {
+                out = n.parse().ok();
+                false
+            }
+            (Some("end_header"), _, _) => false,
+            _ => true,
         }
-    }
-    None
+    });
+    out
 }
 
 fn off<R: BufRead>(r: R) -> Option<u64> {
     let mut seen_magic = false;
-    for (i, line) in lines(r).enumerate() {
+    let mut out = None;
+    let mut i = 0;
+    for_each_line(r, |line| {
+        i += 1;
         if i > 10_000 {
-            return None;
+            return false;
         }
-        let s = String::from_utf8_lossy(&line);
+        let s = String::from_utf8_lossy(line);
         let s = s.split('#').next().unwrap_or("").trim();
         if s.is_empty() {
-            continue;
+            return true;
         }
         let mut rest = s;
         if !seen_magic {
@@ -64,7 +103,7 @@ fn off<R: BufRead>(r: R) -> Option<u64> {
             if let Some(w) = s.split_whitespace().next().filter(|w| w.ends_with("OFF")) {
                 rest = s[w.len()..].trim();
                 if rest.is_empty() {
-                    continue;
+                    return true;
                 }
             }
         }
@@ -73,9 +112,10 @@ fn off<R: BufRead>(r: R) -> Option<u64> {
             .take(2)
             .filter_map(|w| w.parse().ok())
             .collect();
-        return nums.get(1).copied();
-    }
-    None
+        out = nums.get(1).copied();
+        false
+    });
+    out
 }
 
 fn stl<R: BufRead>(mut r: R, len: u64) -> Option<u64> {
@@ -99,31 +139,75 @@ fn stl<R: BufRead>(mut r: R, len: u64) -> Option<u64> {
     }
     let mut count = 0;
     let text = head[..got].to_vec();
-    for line in lines(std::io::Cursor::new(text).chain(r)) {
-        let s = String::from_utf8_lossy(&line);
-        if s.trim_start().starts_with("facet") {
-            count += 1;
-        }
-    }
-    Some(count)
-}
-
-fn obj<R: BufRead>(r: R) -> Option<u64> {
-    let mut count = 0u64;
-    for line in lines(r) {
+    for_each_line(std::io::Cursor::new(text).chain(r), |line| {
         let t = line
             .iter()
             .position(|c| !c.is_ascii_whitespace())
-            .map(|i| &line[i..])
-            .unwrap_or(&[]);
-        if t.len() > 1 && t[0] == b'f' && t[1].is_ascii_whitespace() {
-            let corners = t[1..]
-                .split(|c| c.is_ascii_whitespace())
-                .filter(|w| !w.is_empty())
-                .count() as u64;
-            count += corners.saturating_sub(2);
+            .map_or(&[][..], |i| &line[i..]);
+        if t.starts_with(b"facet") {
+            count += 1;
         }
+        true
+    });
+    Some(count)
+}
+
+/// Counts the triangles of the face lines (`f` then whitespace, after leading
+/// whitespace): corners - 2 each. Streams the bytes: no line is held in memory.
+fn obj<R: BufRead>(mut r: R) -> Option<u64> {
+    #[derive(Clone, Copy)]
+    enum St {
+        Lead,
+        F,
+        Face { corners: u64, in_word: bool },
+        Other,
     }
+    let mut count = 0u64;
+    let mut st = St::Lead;
+    let end_line = |st: St, count: &mut u64| {
+        if let St::Face { corners, .. } = st {
+            *count += corners.saturating_sub(2);
+        }
+    };
+    loop {
+        let buf = match r.fill_buf() {
+            Ok(b) if !b.is_empty() => b,
+            Ok(_) => break,
+            Err(_) => return None,
+        };
+        for &c in buf {
+            if c == b'\n' {
+                end_line(st, &mut count);
+                st = St::Lead;
+                continue;
+            }
+            let ws = c.is_ascii_whitespace();
+            st = match st {
+                St::Lead if ws => St::Lead,
+                St::Lead if c == b'f' => St::F,
+                St::F if ws => St::Face {
+                    corners: 0,
+                    in_word: false,
+                },
+                St::Face { corners, .. } if ws => St::Face {
+                    corners,
+                    in_word: false,
+                },
+                St::Face {
+                    corners,
+                    in_word: false,
+                } => St::Face {
+                    corners: corners + 1,
+                    in_word: true,
+                },
+                St::Face { .. } => st,
+                _ => St::Other,
+            };
+        }
+        let n = buf.len();
+        r.consume(n);
+    }
+    end_line(st, &mut count);
     Some(count)
 }
 

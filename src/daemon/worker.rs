@@ -1,35 +1,55 @@
-//! One repair: the limits, the `holefill fill` child process under a time and memory
-//! limit, and what becomes of the file (outbox, failed folder, back into the inbox).
+//! One job: check the claimed file, run `holefill fill` on it under limits, and dispose
+//! of it (outbox and archive, failed folder, back into the inbox, or later).
 //!
-//! Isolation: each repair is a child process, `holefill fill IN OUT --report LOG`
-//! (the daemon's own executable), so that a crash, a runaway allocation or a hang is
-//! contained. The memory limit is the child's address-space limit (`RLIMIT_AS`). Setting
-//! it in the child takes `pre_exec` or `libc::setrlimit`, both `unsafe`, which the
-//! crate forbids; so the child is started through `/bin/sh -c 'ulimit -v KB; exec
-//! "$0" "$@"' holefill fill ...`: the shell sets the limit on itself and replaces itself
-//! by `holefill` (same pid, the limit inherited). The same script sets a CPU-time limit
-//! (`ulimit -t`) as a backstop that also holds for a worker orphaned by a daemon killed
-//! with SIGKILL. The wall-clock time limit is the daemon's: past it the child's process
-//! group is killed (SIGKILL). Each child gets a process group of its own, so a Ctrl-C
-//! on the daemon's terminal does not kill the repairs the daemon lets finish.
+//! **The file handed over.** The claimed entry is looked at without following it
+//! (`lstat`), opened once with `O_NOFOLLOW | O_NONBLOCK` and checked (`fstat`) to be
+//! the regular file of the inode, size and modification time judged complete in the
+//! inbox; the worker gets that open file as its standard input and reads it as
+//! `/proc/self/fd/0` (`--input-format`), so no path is opened twice and nothing a
+//! producer swaps in is ever read. A symlink, FIFO, socket or device is never opened
+//! for reading or followed: it goes to the failed folder's log as what it is and is
+//! removed (a symlink is removed, not its target). A directory is never taken. After
+//! the repair the open file is checked again: a file that changed meanwhile (a writer
+//! still at work) is put back to settle, its output discarded.
 //!
-//! Exit statuses of `holefill fill`: 0 and 2 (some holes left open) are repairs;
-//! 65 (malformed input) and 70 (internal error) are permanent failures; 74 (I/O, such
-//! as a full disk) and 78 (invalid policy) are retryable (the file goes back into the
-//! inbox and is retried with a back-off); a signal, a timeout or any other status is a
-//! crashed attempt, retried up to `max_attempts`, then a failure.
+//! **Isolation.** Each repair is a child process (the daemon's own executable), so a
+//! crash, a runaway allocation or a hang is contained. The memory limit is the child's
+//! address space (`RLIMIT_AS`); setting it takes `pre_exec` or `setrlimit`, both
+//! `unsafe`, which the crate forbids, so the child is started through `/bin/sh -c
+//! 'ulimit -v KB; ulimit -t CPU; exec "$0" "$@"' holefill fill ...` (the shell sets the
+//! limits on itself and replaces itself by `holefill`). The wall-clock limit is the
+//! daemon's: past it the child's process group is killed. Each child has a process
+//! group of its own, so a Ctrl-C on the daemon's terminal does not kill the repairs the
+//! daemon lets finish, and raises its own `oom_score_adj` to 1000, so that under memory
+//! pressure the kernel kills a worker (a failed attempt) rather than the daemon.
 //!
-//! Test-only hooks (read from the daemon's environment at start, never set in
-//! production): `HOLEFILL_TEST_SLOW=SUBSTR:MS` makes the worker of every file whose
-//! name contains SUBSTR sleep MS milliseconds before the repair (an empty SUBSTR
-//! matches every file); `HOLEFILL_TEST_CRASH_ON=SUBSTR` makes it kill itself with
-//! SIGKILL (as the kernel's OOM killer would).
+//! Exit statuses of `holefill fill`: 0 and 2 (some holes left open) are repairs; 65
+//! (malformed input) and 70 (internal error) are permanent failures; 74 (I/O, such as
+//! a full disk) and 78 (invalid policy) are retryable (back into the inbox, retried
+//! with a back-off); a signal, a timeout or any other status is a crashed attempt,
+//! retried up to `max_attempts`, then a failure.
+//!
+//! **Publishing, crash-safe and idempotent.** Once the worker is done, the output and
+//! archive names are chosen and the final log is written (in the temporary folder);
+//! the job's record takes the names and the identities (device, inode) of the model
+//! and the log. Then: the model is renamed into the outbox (no replace), the outbox
+//! fsynced; the original moved into the archive (or deleted); the log renamed into the
+//! outbox, fsynced; the record removed. Each step first checks whether it is done (the
+//! outbox name holds our inode; the original is gone from the processing folder, or
+//! the archive holds it: same inode, or the same bytes after a copy across file
+//! systems), so a daemon resuming the record after a crash at any point finishes the
+//! same publish: one model, one log, one archived original, and never a second
+//! repair. A step that cannot be done now (the archive not writable, a folder gone)
+//! leaves the job where it is and is retried later; the log, which says the original
+//! is archived, is published only once it is.
 
-use super::claim::{self, Layout, Sidecar};
+use super::claim::{self, Job, Layout, Phase};
 use super::config::{Collision, OnSuccess, Settings};
-use super::fsops;
+use super::fsops::{self, FileId, Stamp};
+use super::hooks::Hooks;
 use super::sniff;
 use serde_json::{json, Value};
+use std::ffi::OsString;
 use std::fs;
 use std::io;
 use std::path::{Path, PathBuf};
@@ -39,95 +59,73 @@ use std::time::{Duration, Instant, SystemTime};
 use tokio::io::AsyncReadExt;
 use tokio::sync::watch;
 
-/// Test-only hooks (see the module documentation).
-#[derive(Clone, Debug, Default)]
-pub struct TestHooks {
-    pub slow: Option<(String, u64)>,
-    pub crash_on: Option<String>,
-}
-
-impl TestHooks {
-    /// Reads `HOLEFILL_TEST_SLOW` and `HOLEFILL_TEST_CRASH_ON`.
-    pub fn from_env() -> TestHooks {
-        let slow = std::env::var("HOLEFILL_TEST_SLOW").ok().and_then(|v| {
-            let (s, ms) = v.rsplit_once(':')?;
-            Some((s.to_string(), ms.parse().ok()?))
-        });
-        let crash_on = std::env::var("HOLEFILL_TEST_CRASH_ON")
-            .ok()
-            .filter(|s| !s.is_empty());
-        TestHooks { slow, crash_on }
-    }
-}
-
 /// What every job of one configuration generation shares.
 #[derive(Debug)]
 pub struct RunCtx {
     pub layout: Layout,
     pub host: String,
     pub pid: u32,
+    pub instance: String,
     pub settings: Settings,
     /// The validated policy snapshot passed to the workers (`None`: built-in default).
     pub policy: Option<PathBuf>,
     /// The policy file it was read from.
     pub policy_source: Option<PathBuf>,
     pub exe: PathBuf,
-    pub hooks: TestHooks,
+    pub hooks: Hooks,
     pub cores: usize,
-}
-
-/// A claimed file.
-#[derive(Clone, Debug)]
-pub struct Job {
-    /// Its name in the inbox and in our processing folder.
-    pub name: String,
-    /// This attempt's number (1-based).
-    pub attempt: u32,
-    /// When it was first seen (RFC 3339).
-    pub received: String,
 }
 
 /// How a job ended.
 #[derive(Debug)]
 pub enum Done {
-    /// Model and log in the outbox.
+    /// Model and log in the outbox, the original archived or deleted.
     Repaired {
-        name: String,
+        job: Job,
         output: String,
         filled: u64,
         skipped: u64,
         failed: u64,
         secs: f64,
+        /// Finished from a record (a daemon died after the repair): not repaired again.
+        resumed: bool,
     },
     /// In the failed folder with its log.
     Failed {
-        name: String,
-        stage: &'static str,
+        job: Job,
+        stage: String,
         error: String,
         secs: f64,
     },
-    /// The worker crashed, hung or was killed; attempts are left: the file stays in our
-    /// folder and is tried again.
+    /// The worker crashed, hung or was killed; attempts are left: the file stays in
+    /// the processing folder and is tried again.
     Again { job: Job, error: String },
-    /// Back in the inbox under `inbox_name` (retryable failure, or shutdown).
+    /// Could not be finished now (a folder missing or not writable): stays in the
+    /// processing folder as it is, tried again later; no attempt counted.
+    Later { job: Job, error: String },
+    /// Back in the inbox under `inbox_name` (retryable failure, shutdown, or a change).
     PutBack {
-        name: String,
-        inbox_name: String,
+        job: Job,
+        inbox_name: OsString,
         error: Option<String>,
+        /// It changed while claimed: it settles again before it is taken.
+        changed: bool,
     },
-    /// Could not be moved anywhere; it stays in our processing folder.
-    Stranded { name: String, error: String },
+    /// Vanished from the processing folder (removed by someone with the daemon's
+    /// rights, or with the whole inbox).
+    Gone { job: Job, error: String },
 }
 
 impl Done {
-    /// The file's name.
-    pub fn name(&self) -> &str {
+    /// The job.
+    pub fn job(&self) -> &Job {
         match self {
-            Done::Repaired { name, .. }
-            | Done::Failed { name, .. }
-            | Done::PutBack { name, .. }
-            | Done::Stranded { name, .. } => name,
-            Done::Again { job, .. } => &job.name,
+            Done::Repaired { job, .. }
+            | Done::Failed { job, .. }
+            | Done::Again { job, .. }
+            | Done::Later { job, .. }
+            | Done::PutBack { job, .. }
+            | Done::Gone { job, .. } => job,
         }
     }
 }
@@ -142,135 +140,94 @@ enum ChildEnd {
     SpawnError(io::Error),
 }
 
-/// Runs one attempt on a claimed file and disposes of it.
+/// When this attempt started.
+#[derive(Clone, Copy, Debug)]
+struct Times {
+    started: SystemTime,
+    t0: Instant,
+}
+
+/// Runs one attempt on a job and disposes of its file.
 pub async fn process(ctx: Arc<RunCtx>, job: Job, mut cancel: watch::Receiver<bool>) -> Done {
-    let started = SystemTime::now();
-    let t0 = Instant::now();
-    let input = ctx.layout.mine.join(&job.name);
-    // recovered from daemons that died while repairing it, max_attempts times
-    if job.attempt > ctx.settings.max_attempts {
-        let started_attempts = job.attempt - 1;
-        let err = format!(
-            "{started_attempts} attempts were started and none finished (the worker or the daemon died each time); max_attempts = {}",
-            ctx.settings.max_attempts
-        );
-        let job = Job {
-            attempt: started_attempts,
-            ..job
-        };
-        return blocking(ctx.clone(), move |c| {
-            fail(&c, &job, started, t0, "worker", err, None, None)
+    let t = Times {
+        started: SystemTime::now(),
+        t0: Instant::now(),
+    };
+    match &job.rec.phase {
+        Phase::Claimed => {}
+        Phase::Repaired { .. } => {
+            return blocking(ctx, move |c| resume_repaired(&c, job, t, None, true)).await
+        }
+        Phase::Failed { .. } => {
+            return blocking(ctx, move |c| finish_failed(&c, job, t, None)).await
+        }
+    }
+    let prepared = {
+        let c = ctx.clone();
+        tokio::task::spawn_blocking(move || prepare(&c, job, t)).await
+    };
+    let (job, file, stamp) = match prepared {
+        Ok(Ok(p)) => p,
+        Ok(Err(done)) => return *done,
+        Err(e) => panic!("the preparation of a job panicked: {e}"),
+    };
+    let ext = ext_of(&job);
+    let out = job.tmp(&format!(".{ext}"));
+    let child_log = job.tmp(".child.json");
+    let _ = fs::remove_file(&out);
+    let _ = fs::remove_file(&child_log);
+    let (end, stderr) = run_child(&ctx, &job, &file, &ext, &out, &child_log, &mut cancel).await;
+    let shown_input = fsops::shown(ctx.layout.inbox.join(&job.name).as_os_str());
+    let msg = stderr_message(&stderr).replace("/proc/self/fd/0", &shown_input);
+    // a writer still at work through an open descriptor: its output is of a partial file
+    let changed = file.metadata().map(|m| Stamp::of(&m)).ok() != Some(stamp);
+    drop(file);
+    if changed && !matches!(end, ChildEnd::Cancelled) {
+        let _ = fs::remove_file(&out);
+        let _ = fs::remove_file(&child_log);
+        return blocking(ctx, move |c| {
+            put_back(
+                &c,
+                job,
+                Some("it changed while it was being repaired; its output is discarded and it settles again".into()),
+                true,
+            )
         })
         .await;
     }
-    let sidecar = Sidecar {
-        attempts: job.attempt,
-        received: job.received.clone(),
-    };
-    if let Err(e) = sidecar.write(&ctx.layout.sidecar(&job.name)) {
-        tracing::warn!(file = %job.name, "cannot record the attempt count: {e}");
-    }
-
-    // limits checked before any worker runs
-    let s = &ctx.settings;
-    match fs::metadata(&input) {
-        Ok(m) if s.max_file_bytes > 0 && m.len() > s.max_file_bytes => {
-            let err = format!(
-                "file size {} bytes > max_file_bytes = {}",
-                m.len(),
-                s.max_file_bytes
-            );
-            return blocking(ctx.clone(), move |c| {
-                fail(&c, &job, started, t0, "limits", err, None, None)
-            })
-            .await;
-        }
-        Ok(_) => {}
-        Err(e) => {
-            return Done::Stranded {
-                name: job.name,
-                error: format!("claimed file unreadable: {e}"),
-            }
-        }
-    }
-    // unreadable (permissions): permanent, and the worker would report it as a
-    // retryable I/O error
-    if let Err(e) = fs::File::open(&input) {
-        if e.kind() == io::ErrorKind::PermissionDenied {
-            let err = format!("cannot read the file: {e}");
-            return blocking(ctx.clone(), move |c| {
-                fail(&c, &job, started, t0, "input", err, None, None)
-            })
-            .await;
-        }
-    }
-    if s.max_faces > 0 {
-        let p = input.clone();
-        let faces = tokio::task::spawn_blocking(move || sniff::declared_faces(&p))
-            .await
-            .ok()
-            .flatten();
-        if let Some(n) = faces.filter(|&n| n > s.max_faces) {
-            let err = format!("{n} faces > max_faces = {}", s.max_faces);
-            return blocking(ctx.clone(), move |c| {
-                fail(&c, &job, started, t0, "limits", err, None, None)
-            })
-            .await;
-        }
-    }
-
-    let out = ctx.layout.tmp.join(&job.name);
-    let log = ctx.layout.tmp.join(format!("{}.child.json", job.name));
-    let _ = fs::remove_file(&out);
-    let _ = fs::remove_file(&log);
-    let (end, stderr) = run_child(&ctx, &job.name, &input, &out, &log, &mut cancel).await;
-    let msg = stderr_message(&stderr).replace(
-        &input.display().to_string(),
-        &ctx.layout.inbox.join(&job.name).display().to_string(),
-    );
-    let ctx2 = ctx.clone();
+    let c2 = ctx.clone();
     match end {
         ChildEnd::Exit(code @ (0 | 2)) => {
-            blocking(ctx2, move |c| {
-                finish_repaired(&c, &job, started, t0, &out, &log, code).unwrap_or_else(
-                    |(stage, e, retry)| {
-                        let _ = fs::remove_file(&out);
-                        if retry {
-                            put_back(&c, &job.name, Some(format!("{stage}: {e}")))
-                        } else {
-                            fail(&c, &job, started, t0, stage, e, None, Some(code))
-                        }
-                    },
-                )
-            })
-            .await
+            blocking(c2, move |c| commit(&c, job, t, &out, &child_log, code)).await
         }
         ChildEnd::Exit(65) => {
-            blocking(ctx2, move |c| {
+            let e = or(msg, "unreadable or malformed input (exit 65)");
+            blocking(c2, move |c| {
                 fail(
                     &c,
-                    &job,
-                    started,
-                    t0,
+                    job,
+                    t,
                     "input",
-                    or(msg, "unreadable or malformed input (exit 65)"),
-                    None,
+                    e,
+                    read_json(&child_log),
                     Some(65),
+                    true,
                 )
             })
             .await
         }
         ChildEnd::Exit(70) => {
-            blocking(ctx2, move |c| {
+            let e = or(msg, "internal error (exit 70)");
+            blocking(c2, move |c| {
                 fail(
                     &c,
-                    &job,
-                    started,
-                    t0,
+                    job,
+                    t,
                     "repair",
-                    or(msg, "internal error (exit 70)"),
-                    None,
+                    e,
+                    read_json(&child_log),
                     Some(70),
+                    true,
                 )
             })
             .await
@@ -282,72 +239,57 @@ pub async fn process(ctx: Arc<RunCtx>, job: Job, mut cancel: watch::Receiver<boo
                 "invalid policy"
             };
             let e = format!("worker exit {code} ({what}): {}", or(msg, "-"));
-            blocking(ctx2, move |c| put_back(&c, &job.name, Some(e))).await
+            blocking(c2, move |c| put_back(&c, job, Some(e), false)).await
         }
         ChildEnd::Cancelled => {
-            blocking(ctx2, move |c| {
-                put_back(&c, &job.name, Some("daemon stopping".into()))
+            blocking(c2, move |c| {
+                put_back(&c, job, Some("daemon stopping".into()), false)
             })
             .await
         }
         ChildEnd::SpawnError(e) => {
             let e = format!("cannot start the worker: {e}");
-            blocking(ctx2, move |c| put_back(&c, &job.name, Some(e))).await
+            blocking(c2, move |c| put_back(&c, job, Some(e), false)).await
         }
         end => {
-            let why = match end {
-                ChildEnd::Timeout(d) => {
-                    format!("time limit of {} s exceeded: worker killed", d.as_secs())
-                }
-                ChildEnd::Signal(sig) if msg.contains("memory allocation") => format!(
-                    "memory limit of {} MiB exceeded: worker died (signal {sig}): {msg}",
-                    ctx.settings.memory_limit_mb
-                ),
-                ChildEnd::Signal(sig) if ctx.settings.memory_limit_mb > 0 && matches!(sig, 6 | 11) => format!(
-                    "worker killed by signal {sig} (an allocation past memory_limit_mb = {} MiB?){}",
-                    ctx.settings.memory_limit_mb,
-                    if msg.is_empty() {
-                        String::new()
-                    } else {
-                        format!(": {msg}")
-                    }
-                ),
-                ChildEnd::Signal(sig) => format!(
-                    "worker killed by signal {sig}{}",
-                    if msg.is_empty() {
-                        String::new()
-                    } else {
-                        format!(": {msg}")
-                    }
-                ),
-                ChildEnd::Exit(125) => {
-                    "the worker's limits could not be applied (ulimit)".to_string()
-                }
-                ChildEnd::Exit(code) => format!(
-                    "worker crashed (exit {code}){}",
-                    if msg.is_empty() {
-                        String::new()
-                    } else {
-                        format!(": {msg}")
-                    }
-                ),
-                _ => "worker ended".to_string(),
-            };
+            let why = crash_reason(&ctx, end, &msg);
             let _ = fs::remove_file(&out);
-            let _ = fs::remove_file(&log);
+            let _ = fs::remove_file(&child_log);
             if job.attempt >= ctx.settings.max_attempts {
                 let e = format!(
                     "{why} (attempt {} of {}; giving up)",
                     job.attempt, ctx.settings.max_attempts
                 );
-                blocking(ctx2, move |c| {
-                    fail(&c, &job, started, t0, "worker", e, None, None)
-                })
-                .await
+                blocking(c2, move |c| fail(&c, job, t, "worker", e, None, None, true)).await
             } else {
                 Done::Again { job, error: why }
             }
         }
+    }
+}
+
+fn crash_reason(ctx: &RunCtx, end: ChildEnd, msg: &str) -> String {
+    let tail = if msg.is_empty() {
+        String::new()
+    } else {
+        format!(": {msg}")
+    };
+    match end {
+        ChildEnd::Timeout(d) => format!("time limit of {} s exceeded: worker killed", d.as_secs()),
+        ChildEnd::Signal(sig) if msg.contains("memory allocation") => format!(
+            "memory limit of {} MiB exceeded: worker died (signal {sig}){tail}",
+            ctx.settings.memory_limit_mb
+        ),
+        ChildEnd::Signal(sig) if ctx.settings.memory_limit_mb > 0 && matches!(sig, 6 | 11) => {
+            format!(
+                "worker killed by signal {sig} (an allocation past memory_limit_mb = {} MiB?){tail}",
+                ctx.settings.memory_limit_mb
+            )
+        }
+        ChildEnd::Signal(sig) => format!("worker killed by signal {sig}{tail}"),
+        ChildEnd::Exit(125) => "the worker's limits could not be applied (ulimit)".to_string(),
+        ChildEnd::Exit(code) => format!("worker crashed (exit {code}){tail}"),
+        _ => "worker ended".to_string(),
     }
 }
 
@@ -359,34 +301,192 @@ fn or(s: String, d: &str) -> String {
     }
 }
 
+fn read_json(p: &Path) -> Option<Value> {
+    fs::read(p)
+        .ok()
+        .and_then(|b| serde_json::from_slice(&b).ok())
+}
+
+/// The lower-case extension of the job's name (`obj`), for the worker's formats.
+fn ext_of(job: &Job) -> String {
+    let n = job.name.to_string_lossy();
+    n.rsplit_once('.')
+        .map(|(_, e)| e.to_ascii_lowercase())
+        .filter(|e| matches!(e.as_str(), "obj" | "ply" | "stl" | "off"))
+        .unwrap_or_else(|| "obj".to_string())
+}
+
 /// Runs a blocking disposition off the async runtime.
 async fn blocking<F>(ctx: Arc<RunCtx>, f: F) -> Done
 where
     F: FnOnce(Arc<RunCtx>) -> Done + Send + 'static,
 {
-    tokio::task::spawn_blocking(move || f(ctx))
-        .await
-        .unwrap_or_else(|e| Done::Stranded {
-            name: String::new(),
-            error: format!("internal error in the disposition: {e}"),
-        })
+    match tokio::task::spawn_blocking(move || f(ctx)).await {
+        Ok(d) => d,
+        Err(e) => panic!("a job's disposition panicked: {e}"),
+    }
 }
 
-/// The last meaningful line(s) of the child's stderr.
-fn stderr_message(tail: &[u8]) -> String {
-    let s = String::from_utf8_lossy(tail);
-    let lines: Vec<&str> = s
-        .lines()
-        .map(|l| l.trim().trim_start_matches("error: "))
-        .filter(|l| !l.is_empty())
-        .collect();
-    let n = lines.len();
-    lines[n.saturating_sub(3)..].join(" | ")
+/// Checks the claimed file and opens it (see the module documentation); applies the
+/// limits that need no worker. `Err` is the job's end.
+#[allow(clippy::result_large_err)]
+fn prepare(ctx: &RunCtx, mut job: Job, t: Times) -> Result<(Job, fs::File, Stamp), Box<Done>> {
+    let path = job.path();
+    let md = match fs::symlink_metadata(&path) {
+        Ok(m) => m,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => {
+            job.forget();
+            return Err(Box::new(Done::Gone {
+                job,
+                error: "it vanished from the processing folder".into(),
+            }));
+        }
+        Err(e) => {
+            return Err(Box::new(Done::Later {
+                job,
+                error: format!("cannot look at the claimed file: {e}"),
+            }))
+        }
+    };
+    if md.is_dir() {
+        // swapped in after the inbox was looked at: directories are never taken
+        return Err(Box::new(put_back(
+            ctx,
+            job,
+            Some("a directory, not a file: left in the inbox".into()),
+            true,
+        )));
+    }
+    if !md.is_file() {
+        return Err(Box::new(reject_special(ctx, job, t, &md)));
+    }
+    let id = FileId::of(&md);
+    let judged = job.rec.stamp;
+    if judged.is_some_and(|s| s.id != id) {
+        return Err(Box::new(put_back(
+            ctx,
+            job,
+            Some("another file took its place between the check and the claim".into()),
+            true,
+        )));
+    }
+    let file = match fsops::open_nofollow(&path) {
+        Ok(f) => f,
+        Err(e) if e.kind() == io::ErrorKind::PermissionDenied => {
+            let err = format!("cannot read the file: {e}");
+            return Err(Box::new(fail(ctx, job, t, "input", err, None, None, true)));
+        }
+        Err(e) => {
+            return Err(Box::new(Done::Later {
+                job,
+                error: format!("cannot open the claimed file: {e}"),
+            }))
+        }
+    };
+    let now = match file.metadata() {
+        Ok(m) if m.is_file() && FileId::of(&m) == id => Stamp::of(&m),
+        _ => {
+            return Err(Box::new(put_back(
+                ctx,
+                job,
+                Some("another file took its place while it was opened".into()),
+                true,
+            )))
+        }
+    };
+    if job.fresh && judged.is_some_and(|s| (s.size, s.mtime_ns) != (now.size, now.mtime_ns)) {
+        return Err(Box::new(put_back(
+            ctx,
+            job,
+            Some("it changed since it was judged complete; it settles again".into()),
+            true,
+        )));
+    }
+    if let Some(problem) = fsops::name_problem(&job.name) {
+        return Err(Box::new(fail(
+            ctx, job, t, "name", problem, None, None, true,
+        )));
+    }
+    let s = &ctx.settings;
+    if job.attempt > s.max_attempts {
+        let started = job.attempt - 1;
+        let err = format!(
+            "{started} attempts were started and none finished (the worker or the daemon died each time); max_attempts = {}",
+            s.max_attempts
+        );
+        job.attempt = started;
+        return Err(Box::new(fail(ctx, job, t, "worker", err, None, None, true)));
+    }
+    // the worker writes there (an adopted folder's may be gone with the outbox)
+    {
+        use std::os::unix::fs::DirBuilderExt;
+        let _ = fs::DirBuilder::new()
+            .recursive(true)
+            .mode(0o700)
+            .create(&job.home.tmp);
+    }
+    if job.rec.attempts != job.attempt {
+        job.rec.attempts = job.attempt;
+        if let Err(e) = job.save() {
+            tracing::warn!(file = %job.shown(), "cannot record the attempt count: {e}");
+        }
+    }
+    if s.max_file_bytes > 0 && now.size > s.max_file_bytes {
+        let err = format!(
+            "file size {} bytes > max_file_bytes = {}",
+            now.size, s.max_file_bytes
+        );
+        return Err(Box::new(fail(ctx, job, t, "limits", err, None, None, true)));
+    }
+    if now.size == 0 {
+        let err = if job.fresh {
+            format!(
+                "the file is empty, and stayed empty for max_wait_secs = {} s",
+                s.max_wait.as_secs()
+            )
+        } else {
+            "the file is empty".to_string()
+        };
+        return Err(Box::new(fail(ctx, job, t, "input", err, None, None, true)));
+    }
+    if s.max_faces > 0 {
+        let name = job.name.to_string_lossy().into_owned();
+        if let Some(n) = sniff::declared_faces(&file, &name).filter(|&n| n > s.max_faces) {
+            let err = format!("{n} faces > max_faces = {}", s.max_faces);
+            return Err(Box::new(fail(ctx, job, t, "limits", err, None, None, true)));
+        }
+    }
+    Ok((job, file, now))
+}
+
+/// A claimed entry that is not a regular file (symlink, FIFO, socket, device): never
+/// opened or followed; removed, with a log in the failed folder saying what it was.
+fn reject_special(ctx: &RunCtx, job: Job, t: Times, md: &fs::Metadata) -> Done {
+    use std::os::unix::fs::FileTypeExt;
+    let ft = md.file_type();
+    let what = if ft.is_symlink() {
+        let target = fs::read_link(job.path())
+            .map(|p| fsops::shown(p.as_os_str()))
+            .unwrap_or_else(|_| "?".into());
+        format!("a symbolic link (to {target})")
+    } else if ft.is_fifo() {
+        "a FIFO (named pipe)".to_string()
+    } else if ft.is_socket() {
+        "a socket".to_string()
+    } else if ft.is_block_device() || ft.is_char_device() {
+        "a device".to_string()
+    } else {
+        "not a regular file".to_string()
+    };
+    let err =
+        format!("not a regular file: {what}; it was neither opened nor followed, and is removed");
+    fail(ctx, job, t, "input", err, None, None, false)
 }
 
 /// The shell script that applies the limits (and test hooks) and execs the worker.
 fn wrapper_script(ctx: &RunCtx, name: &str) -> String {
-    let mut script = String::new();
+    // the worker, not the daemon, is the kernel's OOM killer's first choice
+    let mut script = String::from("{ echo 1000 > /proc/self/oom_score_adj; } 2>/dev/null; ");
     if ctx.settings.memory_limit_mb > 0 {
         script.push_str(&format!(
             "ulimit -v {} || exit 125; ",
@@ -401,16 +501,7 @@ fn wrapper_script(ctx: &RunCtx, name: &str) -> String {
             .saturating_add(60);
         script.push_str(&format!("ulimit -t {cpu} 2>/dev/null; "));
     }
-    if let Some((sub, ms)) = &ctx.hooks.slow {
-        if name.contains(sub.as_str()) {
-            script.push_str(&format!("sleep {}.{:03}; ", ms / 1000, ms % 1000));
-        }
-    }
-    if let Some(sub) = &ctx.hooks.crash_on {
-        if name.contains(sub.as_str()) {
-            script.push_str("kill -KILL $$; ");
-        }
-    }
+    script.push_str(&ctx.hooks.worker_prefix(name));
     script.push_str("exec \"$0\" \"$@\"");
     script
 }
@@ -439,25 +530,33 @@ pub fn probe_limits(memory_limit_mb: u64) -> anyhow::Result<()> {
 
 async fn run_child(
     ctx: &RunCtx,
-    name: &str,
-    input: &Path,
+    job: &Job,
+    input: &fs::File,
+    ext: &str,
     out: &Path,
     log: &Path,
     cancel: &mut watch::Receiver<bool>,
 ) -> (ChildEnd, Vec<u8>) {
+    let stdin = match input.try_clone() {
+        Ok(f) => f,
+        Err(e) => return (ChildEnd::SpawnError(e), Vec::new()),
+    };
+    let name = job.name.to_string_lossy();
     let mut cmd = tokio::process::Command::new("/bin/sh");
-    cmd.arg("-c").arg(wrapper_script(ctx, name)).arg(&ctx.exe);
+    cmd.arg("-c").arg(wrapper_script(ctx, &name)).arg(&ctx.exe);
     cmd.arg("fill")
-        .arg(input)
+        .arg("/proc/self/fd/0")
         .arg(out)
+        .arg("--input-format")
+        .arg(ext)
         .arg("--report")
         .arg(log)
         .arg("--quiet");
     if let Some(p) = &ctx.policy {
         cmd.arg("--policy").arg(p);
     }
-    // the read limits, enforced by the reader too: the header sniff above cannot
-    // count vertices, nor triangles of fanned polygons
+    // the read limits, enforced by the reader too: the header sniff cannot count
+    // vertices, nor triangles of fanned polygons
     let s = &ctx.settings;
     for (flag, value) in [
         ("--max-file-bytes", s.max_file_bytes),
@@ -468,7 +567,7 @@ async fn run_child(
             cmd.arg(flag).arg(value.to_string());
         }
     }
-    cmd.stdin(Stdio::null())
+    cmd.stdin(Stdio::from(stdin))
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .env_remove("NOTIFY_SOCKET")
@@ -476,6 +575,8 @@ async fn run_child(
         .env_remove("WATCHDOG_PID")
         .env_remove("HOLEFILL_TEST_SLOW")
         .env_remove("HOLEFILL_TEST_CRASH_ON")
+        .env_remove("HOLEFILL_TEST_DIE_AT")
+        .env_remove("HOLEFILL_TEST_PAUSE_AT")
         .process_group(0)
         .kill_on_drop(true);
     let mut child = match cmd.spawn() {
@@ -535,7 +636,7 @@ async fn run_child(
         _ = cancelled => ChildEnd::Cancelled,
     };
     if matches!(end, ChildEnd::Timeout(_) | ChildEnd::Cancelled) {
-        kill_group(pid).await;
+        kill_group(pid);
         let _ = child.kill().await;
     }
     let tail = match reader {
@@ -549,54 +650,48 @@ async fn run_child(
 }
 
 /// SIGKILL to the worker's whole process group (the worker and anything it started).
-async fn kill_group(pid: Option<u32>) {
-    let Some(pid) = pid else { return };
-    let _ = tokio::process::Command::new("/bin/sh")
-        .arg("-c")
-        .arg("kill -s KILL -- \"-$1\" 2>/dev/null")
-        .arg("sh")
-        .arg(pid.to_string())
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status()
-        .await;
+fn kill_group(pid: Option<u32>) {
+    let Some(pid) = pid.and_then(|p| rustix::process::Pid::from_raw(p as i32)) else {
+        return;
+    };
+    let _ = rustix::process::kill_process_group(pid, rustix::process::Signal::KILL);
+}
+
+/// The last meaningful line(s) of the child's stderr.
+fn stderr_message(tail: &[u8]) -> String {
+    let s = String::from_utf8_lossy(tail);
+    let lines: Vec<&str> = s
+        .lines()
+        .map(|l| l.trim().trim_start_matches("error: "))
+        .filter(|l| !l.is_empty())
+        .collect();
+    let n = lines.len();
+    lines[n.saturating_sub(3)..].join(" | ")
 }
 
 /// The `"daemon"` object of a log.
-#[allow(clippy::too_many_arguments)]
-fn daemon_info(
-    ctx: &RunCtx,
-    job: &Job,
-    started: SystemTime,
-    t0: Instant,
-    status: &str,
-    output: Option<&Path>,
-    original: Option<String>,
-    exit: Option<i32>,
-) -> Value {
-    json!({
+fn daemon_info(ctx: &RunCtx, job: &Job, t: Times, status: &str, extra: Value) -> Value {
+    let mut v = json!({
         "host": ctx.host,
         "pid": ctx.pid,
-        "input": job.name,
-        "received": job.received,
-        "started": fsops::rfc3339(started),
+        "instance": ctx.instance,
+        "input": job.shown(),
+        "received": job.rec.received,
+        "started": fsops::rfc3339(t.started),
         "finished": fsops::rfc3339(SystemTime::now()),
-        "seconds": t0.elapsed().as_secs_f64(),
+        "seconds": t.t0.elapsed().as_secs_f64(),
         "attempt": job.attempt,
         "max_attempts": ctx.settings.max_attempts,
         "status": status,
-        "worker_exit": exit,
-        "output": output.map(|p| p.display().to_string()),
-        "original": original,
         "policy": ctx.policy_source.as_ref().map(|p| p.display().to_string()),
-    })
-}
-
-/// The format name of a file name's extension.
-fn format_of(name: &str) -> Option<String> {
-    let ext = name.rsplit_once('.')?.1.to_ascii_lowercase();
-    Some(ext)
+    });
+    if job.name.to_str().is_none() {
+        v["input_bytes_hex"] = json!(job.rec.raw);
+    }
+    if let (Some(o), Value::Object(e)) = (v.as_object_mut(), extra) {
+        o.extend(e);
+    }
+    v
 }
 
 /// Builds the final log: the worker's repair log (or a minimal one) plus the daemon's
@@ -620,253 +715,581 @@ fn final_log(
     base
 }
 
-type FinishErr = (&'static str, String, bool);
-
-/// Publishes the worker's model and the log (model first, log last), then archives or
-/// deletes the original. `Err((stage, error, retryable))`.
-fn finish_repaired(
-    ctx: &RunCtx,
-    job: &Job,
-    started: SystemTime,
-    t0: Instant,
-    tmp_model: &Path,
-    child_log: &Path,
-    code: i32,
-) -> Result<Done, FinishErr> {
-    let l = &ctx.layout;
-    let io_err = |what: &str, e: io::Error| -> FinishErr {
-        let retry = fsops::is_disk_full(&e) || e.kind() != io::ErrorKind::InvalidData;
-        ("output", format!("{what}: {e}"), retry)
-    };
-    if !tmp_model.is_file() {
-        return Err((
-            "output",
-            format!("the worker exited {code} but wrote no model"),
-            false,
-        ));
+/// Writes `bytes` as `path` (temporary name, fsync, rename) and returns its identity.
+fn write_file(path: &Path, bytes: &[u8]) -> io::Result<FileId> {
+    use std::io::Write;
+    use std::os::unix::fs::OpenOptionsExt;
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = PathBuf::from(tmp);
+    let _ = fs::remove_file(&tmp);
+    let mut f = fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .mode(0o644)
+        .custom_flags(libc::O_NOFOLLOW)
+        .open(&tmp)?;
+    let r = f
+        .write_all(bytes)
+        .and_then(|()| f.sync_all())
+        .and_then(|()| fs::rename(&tmp, path));
+    if r.is_err() {
+        let _ = fs::remove_file(&tmp);
     }
-    let report: Value = fs::read(child_log)
+    r?;
+    Ok(FileId::of(&f.metadata()?))
+}
+
+/// After a successful worker: chooses the names, writes the final log, records them,
+/// then publishes ([`resume_repaired`]).
+fn commit(ctx: &RunCtx, mut job: Job, t: Times, model: &Path, child_log: &Path, code: i32) -> Done {
+    let l = &ctx.layout;
+    let Some(model_id) = fs::symlink_metadata(model)
         .ok()
-        .and_then(|b| serde_json::from_slice(&b).ok())
-        .ok_or_else(|| {
-            (
-                "output",
-                format!("the worker exited {code} but wrote no readable repair log"),
+        .filter(|m| m.is_file())
+        .map(|m| FileId::of(&m))
+    else {
+        if !job.home.tmp.is_dir() {
+            return put_back(
+                ctx,
+                job,
+                Some("the outbox's temporary folder vanished during the repair".into()),
                 false,
-            )
-        })?;
-    let summary = |k: &str| {
+            );
+        }
+        let e = format!("the worker exited {code} but wrote no model");
+        return fail(ctx, job, t, "output", e, None, Some(code), true);
+    };
+    let Some(report) = read_json(child_log) else {
+        let _ = fs::remove_file(model);
+        let e = format!("the worker exited {code} but wrote no readable repair log");
+        return fail(ctx, job, t, "output", e, None, Some(code), true);
+    };
+    let n = |k: &str| {
         report
             .pointer(&format!("/summary/{k}"))
             .and_then(Value::as_u64)
             .unwrap_or(0)
     };
-    let (filled, skipped, failed) = (summary("filled"), summary("skipped"), summary("failed"));
-
+    let name = job.name_str().unwrap_or_default().to_string();
     let when = SystemTime::now();
-    let rule = ctx.settings.collision;
-    let mut skip = 0;
-    let (final_name, log_path) = loop {
-        if skip > 1000 {
-            return Err(("output", "no free output name".into(), false));
-        }
-        let name = fsops::free_name(&l.outbox, &job.name, &[".repair.json"], when, rule, skip);
-        let model_path = l.outbox.join(&name);
-        let log_path = l.outbox.join(format!("{name}.repair.json"));
-        let original = match ctx.settings.on_success {
-            OnSuccess::Archive => Some("archive".to_string()),
-            OnSuccess::Delete => Some("deleted".to_string()),
-        };
-        let mut log = final_log(
-            report.clone(),
-            "repaired",
-            None,
-            None,
-            daemon_info(
-                ctx,
-                job,
-                started,
-                t0,
-                "repaired",
-                Some(&model_path),
-                original,
-                Some(code),
-            ),
+    let output = fsops::free_name(
+        &l.outbox,
+        &name,
+        &[".repair.json"],
+        when,
+        ctx.settings.collision,
+        0,
+    );
+    let archive = (ctx.settings.on_success == OnSuccess::Archive)
+        .then(|| fsops::free_name(&l.archive, &name, &[], when, Collision::Timestamp, 0));
+    job.rec.phase = Phase::Repaired {
+        output,
+        archive,
+        model: model_id,
+        log: FileId { dev: 0, ino: 0 },
+        code,
+        filled: n("filled"),
+        skipped: n("skipped"),
+        failed: n("failed"),
+    };
+    if let Err(e) = write_repaired_log(ctx, &mut job, t, Some(&report)).and_then(|()| job.save()) {
+        // nothing is published yet: the file goes back, to be tried again
+        job.rec.phase = Phase::Claimed;
+        return put_back(
+            ctx,
+            job,
+            Some(format!("cannot record the repair: {e}")),
+            false,
         );
-        if let Some(o) = log.pointer_mut("/input/path") {
-            *o = json!(l.inbox.join(&job.name).display().to_string());
-        }
-        if let Some(o) = log.pointer_mut("/output/path") {
-            *o = json!(model_path.display().to_string());
-        }
-        let text =
-            serde_json::to_string_pretty(&log).map_err(|e| ("output", e.to_string(), false))?;
-        let tmp_log = l.tmp.join(format!("{name}.repair.json"));
-        holefill::io::write_atomic(&tmp_log, text.as_bytes()).map_err(|e| match e {
-            holefill::io::IoError::Io { source, .. } => io_err("writing the log", source),
-            other => ("output", other.to_string(), true),
-        })?;
-        match fsops::publish(tmp_model, &model_path, rule) {
-            Ok(()) => {}
-            Err(e) if e.kind() == io::ErrorKind::AlreadyExists => {
-                let _ = fs::remove_file(&tmp_log);
-                skip += 1;
-                continue;
-            }
-            Err(e) => {
-                let _ = fs::remove_file(&tmp_log);
-                return Err(io_err("publishing the model", e));
-            }
-        }
-        match fsops::publish(&tmp_log, &log_path, rule) {
-            Ok(()) => {}
-            Err(e) if e.kind() == io::ErrorKind::AlreadyExists => {
-                let _ = fs::remove_file(&model_path);
-                let _ = fs::remove_file(&tmp_log);
-                skip += 1;
-                continue;
-            }
-            Err(e) => {
-                if rule == Collision::Timestamp {
-                    let _ = fs::remove_file(&model_path);
-                }
-                let _ = fs::remove_file(&tmp_log);
-                return Err(io_err("publishing the log", e));
-            }
-        }
-        let _ = fs::remove_file(&tmp_log);
-        break (name, log_path);
-    };
-    if let Err(e) = fsops::fsync_dir(&l.outbox) {
-        tracing::warn!(file = %job.name, "fsync of the outbox failed: {e}");
     }
-    let _ = fs::remove_file(child_log);
-
-    // only now the original (the worker's model stays linked in our temporary folder
-    // until the original is gone: a daemon recovering our files after a crash here
-    // recognises the published output by its inode)
-    let src = l.mine.join(&job.name);
-    let moved = match ctx.settings.on_success {
-        OnSuccess::Archive => fsops::move_into(&src, &l.archive, &job.name, &[]).map(|p| {
-            let _ = fsops::fsync_dir(&l.archive);
-            p.display().to_string()
-        }),
-        OnSuccess::Delete => fs::remove_file(&src).map(|()| "deleted".to_string()),
-    };
-    let _ = fs::remove_file(l.sidecar(&job.name));
-    let _ = fsops::fsync_dir(&l.mine);
-    let _ = fs::remove_file(tmp_model);
-    match moved {
-        Ok(_) => Ok(Done::Repaired {
-            name: job.name.clone(),
-            output: final_name,
-            filled,
-            skipped,
-            failed,
-            secs: t0.elapsed().as_secs_f64(),
-        }),
-        Err(e) => {
-            tracing::error!(file = %job.name, log = %log_path.display(), "repaired, but the original could not be archived: {e}");
-            Ok(Done::Stranded {
-                name: job.name.clone(),
-                error: format!(
-                    "repaired as {final_name}, but the original could not be archived: {e}"
-                ),
-            })
-        }
-    }
+    ctx.hooks.at("committing", &job.name);
+    resume_repaired(ctx, job, t, Some(&report), false)
 }
 
-/// Moves the original, untouched, to the failed folder and writes its log there.
-#[allow(clippy::too_many_arguments)]
-fn fail(
+/// Writes the final log of a repaired job into its temporary folder (with the output
+/// and archive names of its record) and puts its identity into the record (not saved).
+fn write_repaired_log(
     ctx: &RunCtx,
-    job: &Job,
-    started: SystemTime,
-    t0: Instant,
-    stage: &'static str,
-    error: String,
-    report: Option<Value>,
-    exit: Option<i32>,
-) -> Done {
+    job: &mut Job,
+    t: Times,
+    report: Option<&Value>,
+) -> io::Result<()> {
     let l = &ctx.layout;
-    let src = l.mine.join(&job.name);
-    let dst = match fsops::move_into(&src, &l.failed, &job.name, &[".repair.json"]) {
-        Ok(p) => p,
-        Err(e) => {
-            tracing::error!(file = %job.name, "cannot move to the failed folder: {e}");
-            return put_back(
-                ctx,
-                &job.name,
-                Some(format!(
-                    "{stage}: {error}; then moving it to the failed folder: {e}"
-                )),
-            );
-        }
+    let Phase::Repaired {
+        output,
+        archive,
+        code,
+        ..
+    } = &job.rec.phase
+    else {
+        return Err(io::Error::other("not a repaired job"));
     };
-    let _ = fs::remove_file(l.sidecar(&job.name));
-    let _ = fsops::fsync_dir(&l.mine);
-    let mut base = report.unwrap_or_else(|| {
-        json!({
-            "holefill_version": env!("CARGO_PKG_VERSION"),
-            "input": { "path": l.inbox.join(&job.name).display().to_string(), "format": format_of(&job.name) },
-        })
-    });
-    if let Some(o) = base.pointer_mut("/input/path") {
-        *o = json!(l.inbox.join(&job.name).display().to_string());
-    }
-    let log = final_log(
+    let model_path = l.outbox.join(output);
+    let archived = archive
+        .as_ref()
+        .map(|a| l.archive.join(a).display().to_string());
+    let base = report
+        .cloned()
+        .or_else(|| read_json(&job.tmp(".child.json")))
+        .unwrap_or(Value::Null);
+    let mut log = final_log(
         base,
-        "failed",
-        Some(stage),
-        Some(&error),
+        "repaired",
+        None,
+        None,
         daemon_info(
             ctx,
             job,
-            started,
-            t0,
-            "failed",
-            None,
-            Some(dst.display().to_string()),
-            exit,
+            t,
+            "repaired",
+            json!({
+                "worker_exit": code,
+                "output": model_path.display().to_string(),
+                "original": if archive.is_some() { "archive" } else { "deleted" },
+                "archived_as": archived,
+            }),
         ),
     );
-    let log_path = {
-        let mut p = dst.as_os_str().to_owned();
-        p.push(".repair.json");
-        PathBuf::from(p)
-    };
-    let text = serde_json::to_string_pretty(&log).unwrap_or_default();
-    if let Err(e) = holefill::io::write_atomic(&log_path, text.as_bytes()) {
-        tracing::error!(file = %job.name, "cannot write the failure log {}: {e}", log_path.display());
+    if let Some(o) = log.pointer_mut("/input/path") {
+        *o = json!(fsops::shown(l.inbox.join(&job.name).as_os_str()));
     }
-    let _ = fsops::fsync_dir(&l.failed);
-    Done::Failed {
-        name: job.name.clone(),
-        stage,
-        error,
-        secs: t0.elapsed().as_secs_f64(),
+    if let Some(o) = log.pointer_mut("/output/path") {
+        *o = json!(model_path.display().to_string());
     }
+    let text = serde_json::to_string_pretty(&log).map_err(io::Error::other)?;
+    let id = write_file(&job.tmp(".log.json"), text.as_bytes())?;
+    if let Phase::Repaired { log, .. } = &mut job.rec.phase {
+        *log = id;
+    }
+    Ok(())
 }
 
-/// Puts the file back into the inbox (retry later).
-pub fn put_back(ctx: &RunCtx, name: &str, error: Option<String>) -> Done {
-    let _ = fs::remove_file(ctx.layout.tmp.join(name));
-    let _ = fs::remove_file(ctx.layout.tmp.join(format!("{name}.child.json")));
-    match claim::put_back(&ctx.layout, name) {
+/// A step of the publish that cannot be done now.
+fn later(job: Job, error: String) -> Done {
+    Done::Later { job, error }
+}
+
+/// Publishes a repaired job from its record, each step only if not done yet (see the
+/// module documentation). `resumed`: finishing the record of a daemon that died.
+fn resume_repaired(
+    ctx: &RunCtx,
+    mut job: Job,
+    t: Times,
+    report: Option<&Value>,
+    resumed: bool,
+) -> Done {
+    let l = &ctx.layout;
+    let rule = ctx.settings.collision;
+    let name = job.name_str().unwrap_or_default().to_string();
+    let tmp_model = job.tmp(&format!(".{}", ext_of(&job)));
+    let tmp_log = job.tmp(".log.json");
+    for _ in 0..64 {
+        let Phase::Repaired {
+            output,
+            archive,
+            model,
+            log,
+            filled,
+            skipped,
+            failed,
+            ..
+        } = job.rec.phase.clone()
+        else {
+            return later(job, "internal error: not a repaired job".into());
+        };
+        let renamed = |job: &mut Job, skip_from: &str| -> io::Result<()> {
+            // `output` (or its log) is someone else's: take the next free name
+            let mut skip = 1;
+            let new = loop {
+                let cand = fsops::free_name(
+                    &l.outbox,
+                    &name,
+                    &[".repair.json"],
+                    SystemTime::now(),
+                    Collision::Timestamp,
+                    skip,
+                );
+                if cand != skip_from {
+                    break cand;
+                }
+                skip += 1;
+            };
+            let old_path = l.outbox.join(skip_from);
+            if FileId::lstat(&old_path) == Some(model) {
+                fsops::rename_noreplace(&old_path, &l.outbox.join(&new))?;
+            }
+            if let Phase::Repaired { output, .. } = &mut job.rec.phase {
+                *output = new;
+            }
+            write_repaired_log(ctx, job, t, report)?;
+            job.save()
+        };
+
+        // 1. the model
+        let out_path = l.outbox.join(&output);
+        let there = FileId::lstat(&out_path);
+        if there != Some(model) {
+            if FileId::lstat(&tmp_model) == Some(model) {
+                if there.is_some() && rule == Collision::Timestamp {
+                    if let Err(e) = renamed(&mut job, &output) {
+                        return later(job, format!("choosing another output name: {e}"));
+                    }
+                    continue;
+                }
+                match fsops::publish(&tmp_model, &out_path, rule) {
+                    Ok(()) => {}
+                    Err(e) if e.kind() == io::ErrorKind::AlreadyExists => continue,
+                    Err(e) => return later(job, format!("publishing the model: {e}")),
+                }
+                if let Err(e) = fsops::fsync_dir(&l.outbox) {
+                    return later(job, format!("syncing the outbox: {e}"));
+                }
+                ctx.hooks.at("model-published", &job.name);
+            } else if fs::symlink_metadata(job.path()).is_ok() {
+                // the worker's model is lost (its folder removed): repair again
+                job.rec.phase = Phase::Claimed;
+                let _ = job.save();
+                return later(
+                    job,
+                    "its repaired model was lost before it was published; it is repaired again"
+                        .into(),
+                );
+            } else {
+                tracing::error!(file = %job.shown(), "the repaired model {} is gone from the outbox (taken before its log was written?)", out_path.display());
+            }
+        }
+
+        // 2. the original
+        let src = job.path();
+        if fs::symlink_metadata(&src).is_ok() {
+            match &archive {
+                Some(a) => {
+                    let dst = l.archive.join(a);
+                    if fs::symlink_metadata(&dst).is_ok() {
+                        // ours, from before a crash (same inode, or a complete copy), or
+                        // someone else's file under that name
+                        if FileId::lstat(&dst) == FileId::lstat(&src)
+                            || fsops::same_content(&src, &dst)
+                        {
+                            if let Err(e) = fs::remove_file(&src) {
+                                return later(job, format!("removing the archived original from the processing folder: {e}"));
+                            }
+                        } else {
+                            let new = fsops::free_name(
+                                &l.archive,
+                                &name,
+                                &[],
+                                SystemTime::now(),
+                                Collision::Timestamp,
+                                1,
+                            );
+                            if let Phase::Repaired { archive, .. } = &mut job.rec.phase {
+                                *archive = Some(new);
+                            }
+                            if let Err(e) = write_repaired_log(ctx, &mut job, t, report)
+                                .and_then(|()| job.save())
+                            {
+                                return later(job, format!("recording another archive name: {e}"));
+                            }
+                            continue;
+                        }
+                    } else {
+                        ctx.hooks.at("move", &job.name);
+                        let copy = format!(".holefill-{}.copy", job.id);
+                        let linked = || ctx.hooks.at("archive-linked", &job.name);
+                        match fsops::move_file(&src, &l.archive, a.as_ref(), &copy, &linked) {
+                            Ok(()) => {}
+                            Err(e) if e.kind() == io::ErrorKind::AlreadyExists => continue,
+                            Err(e) => {
+                                return later(
+                                    job,
+                                    format!(
+                                        "archiving the original in {}: {e} (the model is in the outbox; its log follows once the original is archived)",
+                                        l.archive.display()
+                                    ),
+                                )
+                            }
+                        }
+                        if let Err(e) = fsops::fsync_dir(&l.archive) {
+                            return later(job, format!("syncing the archive: {e}"));
+                        }
+                    }
+                }
+                None => {
+                    if let Err(e) = fs::remove_file(&src) {
+                        return later(job, format!("deleting the original: {e}"));
+                    }
+                    if let Err(e) = fsops::fsync_dir(&job.home.dir) {
+                        return later(job, format!("syncing the processing folder: {e}"));
+                    }
+                }
+            }
+            ctx.hooks.at("archived", &job.name);
+        }
+
+        // 3. the log
+        let log_path = l.outbox.join(format!("{output}.repair.json"));
+        let there = FileId::lstat(&log_path);
+        if there != Some(log) {
+            if FileId::lstat(&tmp_log) != Some(log) {
+                // lost with the temporary folder: write it again
+                if let Err(e) =
+                    write_repaired_log(ctx, &mut job, t, report).and_then(|()| job.save())
+                {
+                    return later(job, format!("writing the log: {e}"));
+                }
+                continue;
+            }
+            if there.is_some() && rule == Collision::Timestamp {
+                if let Err(e) = renamed(&mut job, &output) {
+                    return later(job, format!("choosing another output name: {e}"));
+                }
+                continue;
+            }
+            match fsops::publish(&tmp_log, &log_path, rule) {
+                Ok(()) => {}
+                Err(e) if e.kind() == io::ErrorKind::AlreadyExists => continue,
+                Err(e) => return later(job, format!("publishing the log: {e}")),
+            }
+            if let Err(e) = fsops::fsync_dir(&l.outbox) {
+                return later(job, format!("syncing the outbox: {e}"));
+            }
+            ctx.hooks.at("log-published", &job.name);
+        }
+        job.forget();
+        for s in [
+            ".child.json".to_string(),
+            ".log.json".into(),
+            format!(".{}", ext_of(&job)),
+        ] {
+            let _ = fs::remove_file(job.tmp(&s));
+        }
+        return Done::Repaired {
+            job,
+            output,
+            filled,
+            skipped,
+            failed,
+            secs: t.t0.elapsed().as_secs_f64(),
+            resumed,
+        };
+    }
+    later(
+        job,
+        "no free output or archive name after many tries".into(),
+    )
+}
+
+/// Sends the file, untouched, to the failed folder with its log (`kept` false: not a
+/// regular file, removed instead): records the decision, then [`finish_failed`].
+#[allow(clippy::too_many_arguments)]
+fn fail(
+    ctx: &RunCtx,
+    mut job: Job,
+    t: Times,
+    stage: &str,
+    error: String,
+    report: Option<Value>,
+    exit: Option<i32>,
+    kept: bool,
+) -> Done {
+    for s in [".child.json".to_string(), format!(".{}", ext_of(&job))] {
+        let _ = fs::remove_file(job.tmp(&s));
+    }
+    let name = match job.name_str() {
+        Some(n) => n.to_string(),
+        None => fsops::safe_name(&job.name),
+    };
+    let dest = fsops::free_name(
+        &ctx.layout.failed,
+        &name,
+        &[".repair.json"],
+        SystemTime::now(),
+        Collision::Timestamp,
+        0,
+    );
+    job.rec.phase = Phase::Failed {
+        dest,
+        kept,
+        stage: stage.to_string(),
+        error,
+        exit,
+    };
+    if let Err(e) = job.save() {
+        tracing::warn!(file = %job.shown(), "cannot record the failure: {e}");
+    }
+    finish_failed(ctx, job, t, report)
+}
+
+/// Moves the original to the failed folder (or removes an entry that is not a regular
+/// file) and writes its log there, each step only if not done yet.
+fn finish_failed(ctx: &RunCtx, mut job: Job, t: Times, report: Option<Value>) -> Done {
+    let l = &ctx.layout;
+    for _ in 0..64 {
+        let Phase::Failed {
+            dest,
+            kept,
+            stage,
+            error,
+            exit,
+        } = job.rec.phase.clone()
+        else {
+            return later(job, "internal error: not a failed job".into());
+        };
+        let src = job.path();
+        let dst = l.failed.join(&dest);
+        if fs::symlink_metadata(&src).is_ok() {
+            if kept {
+                if fs::symlink_metadata(&dst).is_ok() {
+                    if FileId::lstat(&dst) == FileId::lstat(&src) || fsops::same_content(&src, &dst)
+                    {
+                        let _ = fs::remove_file(&src);
+                    } else {
+                        let base = dest.clone();
+                        let new = fsops::free_name(
+                            &l.failed,
+                            &base,
+                            &[".repair.json"],
+                            SystemTime::now(),
+                            Collision::Timestamp,
+                            1,
+                        );
+                        if let Phase::Failed { dest, .. } = &mut job.rec.phase {
+                            *dest = new;
+                        }
+                        let _ = job.save();
+                        continue;
+                    }
+                } else {
+                    ctx.hooks.at("move", &job.name);
+                    let copy = format!(".holefill-{}.copy", job.id);
+                    match fsops::move_file(&src, &l.failed, dest.as_ref(), &copy, &|| {}) {
+                        Ok(()) => {}
+                        Err(e) if e.kind() == io::ErrorKind::AlreadyExists => {
+                            let new = fsops::free_name(
+                                &l.failed,
+                                &dest,
+                                &[".repair.json"],
+                                SystemTime::now(),
+                                Collision::Timestamp,
+                                1,
+                            );
+                            if let Phase::Failed { dest, .. } = &mut job.rec.phase {
+                                *dest = new;
+                            }
+                            let _ = job.save();
+                            continue;
+                        }
+                        Err(e) => {
+                            return later(
+                                job,
+                                format!(
+                                    "{stage}: {error}; then moving it to the failed folder: {e}"
+                                ),
+                            )
+                        }
+                    }
+                    let _ = fsops::fsync_dir(&l.failed);
+                }
+            } else if let Err(e) = fs::remove_file(&src) {
+                return later(job, format!("removing it: {e}"));
+            }
+            let _ = fsops::fsync_dir(&job.home.dir);
+            ctx.hooks.at("failed-moved", &job.name);
+        }
+        let log_path = l.failed.join(format!("{dest}.repair.json"));
+        if fs::symlink_metadata(&log_path).is_err() {
+            let mut base = report.clone().unwrap_or_else(|| {
+                json!({
+                    "holefill_version": env!("CARGO_PKG_VERSION"),
+                    "input": { "format": ext_of(&job) },
+                })
+            });
+            let input = fsops::shown(l.inbox.join(&job.name).as_os_str());
+            match base.pointer_mut("/input") {
+                Some(Value::Object(o)) => {
+                    o.insert("path".into(), json!(input));
+                }
+                _ => base["input"] = json!({ "path": input }),
+            }
+            let original = kept.then(|| dst.display().to_string());
+            let log = final_log(
+                base,
+                "failed",
+                Some(&stage),
+                Some(&error),
+                daemon_info(
+                    ctx,
+                    &job,
+                    t,
+                    "failed",
+                    json!({ "worker_exit": exit, "output": null, "original": original }),
+                ),
+            );
+            let text = serde_json::to_string_pretty(&log).unwrap_or_default();
+            let tmp = l.failed.join(format!(".holefill-{}.log", job.id));
+            let r = write_file(&tmp, text.as_bytes()).and_then(|_| {
+                match fsops::rename_noreplace(&tmp, &log_path) {
+                    Err(e) if e.kind() == io::ErrorKind::AlreadyExists => Ok(()),
+                    r => r,
+                }
+            });
+            let _ = fs::remove_file(&tmp);
+            if let Err(e) = r {
+                return later(
+                    job,
+                    format!("writing the failure log {}: {e}", log_path.display()),
+                );
+            }
+            let _ = fsops::fsync_dir(&l.failed);
+        }
+        job.forget();
+        return Done::Failed {
+            job,
+            stage,
+            error,
+            secs: t.t0.elapsed().as_secs_f64(),
+        };
+    }
+    later(
+        job,
+        "no free name in the failed folder after many tries".into(),
+    )
+}
+
+/// Puts the file back into the inbox (retry later, or settle again when `changed`).
+fn put_back(ctx: &RunCtx, job: Job, error: Option<String>, changed: bool) -> Done {
+    for s in [
+        ".child.json".to_string(),
+        ".log.json".into(),
+        format!(".{}", ext_of(&job)),
+    ] {
+        let _ = fs::remove_file(job.tmp(&s));
+    }
+    match claim::put_back(&ctx.layout, &job, &|| ctx.hooks.at("move", &job.name)) {
         Ok(inbox_name) => Done::PutBack {
-            name: name.to_string(),
+            job,
             inbox_name,
             error,
+            changed,
         },
-        Err(e) => Done::Stranded {
-            name: name.to_string(),
-            error: format!(
+        Err(e) => later(
+            job,
+            format!(
                 "{}; and it could not be put back into the inbox: {e}",
                 error.unwrap_or_default()
             ),
-        },
+        ),
     }
+}
+
+/// Puts a job that waits (crashed attempt, or a step to retry) back into the inbox at
+/// shutdown, when it is still only claimed (nothing published). `None`: it stays in
+/// its processing folder for the next daemon.
+pub fn put_back_waiting(ctx: &RunCtx, job: &Job) -> Option<io::Result<OsString>> {
+    (job.rec.phase == Phase::Claimed && job.name_str().is_some())
+        .then(|| claim::put_back(&ctx.layout, job, &|| ctx.hooks.at("move", &job.name)))
 }
 
 #[cfg(test)]

@@ -56,14 +56,57 @@ impl Folders {
         v.sort();
         v
     }
-    /// Files in any daemon's processing folder.
+    /// The names of the files in any daemon's processing folder (read from their job
+    /// records, `ID.json` beside each claimed file `ID`).
     pub fn processing(&self) -> Vec<String> {
         let mut v = Vec::new();
         if let Ok(rd) = fs::read_dir(self.inbox.join(".processing")) {
             for d in rd.flatten() {
-                v.extend(Folders::files(&d.path()));
+                if d.file_name().to_string_lossy().starts_with('.') {
+                    continue;
+                }
+                let Ok(files) = fs::read_dir(d.path()) else {
+                    continue;
+                };
+                for e in files.flatten() {
+                    let n = e.file_name().to_string_lossy().into_owned();
+                    let Some(id) = n.strip_suffix(".json") else {
+                        // a file without a record (an older holefill's layout)
+                        let rec = d.path().join(format!("{n}.json"));
+                        if !n.starts_with('.')
+                            && !n.ends_with(".tmp")
+                            && e.file_type().is_ok_and(|t| t.is_file())
+                            && !rec.exists()
+                        {
+                            v.push(n);
+                        }
+                        continue;
+                    };
+                    if fs::symlink_metadata(d.path().join(id)).is_err() {
+                        continue;
+                    }
+                    let rec: Value = fs::read(e.path())
+                        .ok()
+                        .and_then(|b| serde_json::from_slice(&b).ok())
+                        .unwrap_or(Value::Null);
+                    if let Some(name) = rec["name"].as_str() {
+                        v.push(name.to_string());
+                    }
+                }
             }
         }
+        v.sort();
+        v
+    }
+    /// Every entry (any type, dot-files too) directly in `dir`, sorted.
+    pub fn entries(dir: &Path) -> Vec<String> {
+        let mut v: Vec<String> = fs::read_dir(dir)
+            .map(|rd| {
+                rd.flatten()
+                    .map(|e| e.file_name().to_string_lossy().into_owned())
+                    .collect()
+            })
+            .unwrap_or_default();
         v.sort();
         v
     }
@@ -90,11 +133,27 @@ pub struct Daemon {
 impl Daemon {
     /// Starts `holefill watch` on the folders with extra flags and environment.
     pub fn start(f: &Folders, extra: &[&str], env: &[(&str, &str)]) -> Daemon {
+        Daemon::start_under(f, &[], extra, env)
+    }
+    /// [`Daemon::start`] through a wrapper command (`setpriv ...`, `unshare ...`).
+    pub fn start_under(
+        f: &Folders,
+        wrapper: &[&str],
+        extra: &[&str],
+        env: &[(&str, &str)],
+    ) -> Daemon {
         static N: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
         let n = N.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
         let stderr = f.root().join(format!("daemon-{n}.log"));
         let err = fs::File::create(&stderr).unwrap();
-        let mut cmd = Command::new(bin());
+        let mut cmd = match wrapper.split_first() {
+            Some((w, rest)) => {
+                let mut c = Command::new(w);
+                c.args(rest).arg(bin());
+                c
+            }
+            None => Command::new(bin()),
+        };
         cmd.arg("watch")
             .arg("--inbox")
             .arg(&f.inbox)
@@ -127,7 +186,16 @@ impl Daemon {
     }
     /// [`Daemon::start`], then waits for its start-up scan to be over.
     pub fn ready(f: &Folders, extra: &[&str], env: &[(&str, &str)]) -> Daemon {
-        let d = Daemon::start(f, extra, env);
+        Daemon::ready_under(f, &[], extra, env)
+    }
+    /// [`Daemon::start_under`], then waits for its start-up scan to be over.
+    pub fn ready_under(
+        f: &Folders,
+        wrapper: &[&str],
+        extra: &[&str],
+        env: &[(&str, &str)],
+    ) -> Daemon {
+        let d = Daemon::start_under(f, wrapper, extra, env);
         assert!(
             wait_until(Duration::from_secs(20), || d
                 .log()
@@ -186,6 +254,78 @@ impl Drop for Daemon {
     }
 }
 
+/// The peak resident memory of a process in KiB (`VmHWM`).
+pub fn vmhwm_kib(pid: u32) -> u64 {
+    let s = fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
+    s.lines()
+        .find_map(|l| l.strip_prefix("VmHWM:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+        .unwrap_or(0)
+}
+
+/// The children of a process (for a daemon started through a wrapper).
+pub fn children_of(pid: u32) -> Vec<u32> {
+    let mut v = Vec::new();
+    if let Ok(rd) = fs::read_dir(format!("/proc/{pid}/task")) {
+        for t in rd.flatten() {
+            if let Ok(c) = fs::read_to_string(t.path().join("children")) {
+                v.extend(c.split_whitespace().filter_map(|x| x.parse::<u32>().ok()));
+            }
+        }
+    }
+    v
+}
+
+/// Sends a signal to a process by pid.
+pub fn kill(pid: u32, sig: &str) -> bool {
+    Command::new("kill")
+        .args(["-s", sig, &pid.to_string()])
+        .status()
+        .is_ok_and(|s| s.success())
+}
+
+/// True when the tests run as root.
+pub fn is_root() -> bool {
+    rustix::process::geteuid().is_root()
+}
+
+/// Exchanges two names atomically (`renameat2(RENAME_EXCHANGE)`).
+pub fn exchange(a: &Path, b: &Path) -> std::io::Result<()> {
+    use rustix::fs::{renameat_with, RenameFlags, CWD};
+    renameat_with(CWD, a, CWD, b, RenameFlags::EXCHANGE).map_err(Into::into)
+}
+
+/// A mount made by a test, lazily unmounted when dropped.
+pub struct Mount(pub PathBuf);
+impl Mount {
+    /// `mount ARGS... TARGET`; `None` when it fails.
+    pub fn new(args: &[&str], target: &Path) -> Option<Mount> {
+        let ok = Command::new("mount")
+            .args(args)
+            .arg(target)
+            .stderr(Stdio::null())
+            .status()
+            .is_ok_and(|s| s.success());
+        ok.then(|| Mount(target.to_path_buf()))
+    }
+    /// A read-only bind mount of `dir` on itself.
+    pub fn read_only(dir: &Path) -> Option<Mount> {
+        let d = dir.to_str()?;
+        let m = Mount::new(&["--bind", d], dir)?;
+        let ok = Command::new("mount")
+            .args(["-o", "remount,ro,bind"])
+            .arg(dir)
+            .status()
+            .is_ok_and(|s| s.success());
+        ok.then_some(m)
+    }
+}
+impl Drop for Mount {
+    fn drop(&mut self) {
+        let _ = Command::new("umount").arg("-l").arg(&self.0).status();
+    }
+}
+
 /// Polls `cond` every 50 ms until true or `timeout`.
 pub fn wait_until(timeout: Duration, mut cond: impl FnMut() -> bool) -> bool {
     let t = Instant::now();
@@ -215,7 +355,9 @@ pub fn mesh() -> (String, usize) {
 
 /// Writes `text` as `dir/name` the recommended way: a dot-file, then rename.
 pub fn drop_renamed(dir: &Path, name: &str, text: &str) {
-    let tmp = dir.join(format!(".{name}.part"));
+    static N: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let n = N.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+    let tmp = dir.join(format!(".drop-{n}.part"));
     fs::write(&tmp, text).unwrap();
     fs::rename(&tmp, dir.join(name)).unwrap();
 }
