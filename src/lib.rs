@@ -21,6 +21,7 @@ pub mod geometry;
 pub mod io;
 pub mod mesh;
 pub mod patch;
+pub mod picture;
 pub mod pipeline;
 pub mod policy;
 pub mod report;

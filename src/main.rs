@@ -1,7 +1,9 @@
-//! The `holefill` command: `fill` (one-shot), `check-policy`, `watch` (the daemon).
+//! The `holefill` command: `fill` (one-shot), `check-policy`, `watch` (the daemon),
+//! `report` (a table of repair logs).
 #![forbid(unsafe_code)]
 
 mod daemon;
+mod metrics;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -52,6 +54,18 @@ enum Cmd {
     },
     /// Watch an inbox and repair every mesh dropped into it (the daemon).
     Watch(daemon::WatchArgs),
+    /// Summarise the repair logs (`*.repair.json`) of a folder as a table, newest first.
+    Report(ReportArgs),
+}
+
+#[derive(clap::Args)]
+struct ReportArgs {
+    /// Folders holding repair logs (an outbox, a failed folder, ...).
+    #[arg(required = true)]
+    dirs: Vec<PathBuf>,
+    /// Show only the newest N (0: all).
+    #[arg(long, short = 'n', default_value_t = 0)]
+    limit: usize,
 }
 
 #[derive(clap::Args)]
@@ -86,6 +100,10 @@ struct FillArgs {
     /// Refuse inputs with more vertices than this (0 = no limit).
     #[arg(long, default_value_t = 0)]
     max_vertices: u64,
+    /// Draw a picture of the repair (PNG): the model with every hole outlined and
+    /// coloured by status, and each hole before and after.
+    #[arg(long)]
+    picture: Option<PathBuf>,
 }
 
 fn main() -> ExitCode {
@@ -119,7 +137,22 @@ fn main() -> ExitCode {
                 ExitCode::from(exit::CONFIG)
             }
         },
+        Cmd::Report(args) => ExitCode::from(run_report(&args)),
     }
+}
+
+/// `holefill report DIR...`: the logs' summary as a table.
+fn run_report(args: &ReportArgs) -> u8 {
+    for d in &args.dirs {
+        if !d.is_dir() {
+            eprintln!("error: {}: not a folder", d.display());
+            return exit::USAGE;
+        }
+    }
+    let dirs: Vec<&Path> = args.dirs.iter().map(PathBuf::as_path).collect();
+    let entries = daemon::index::scan(&dirs, args.limit);
+    print!("{}", daemon::index::table(&entries));
+    exit::OK
 }
 
 /// The library catches the panics of faer's sparse LU on a singular matrix (it
@@ -267,6 +300,12 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
     holefill::write(&args.output, &out, Some(out_format)).map_err(io_failure)?;
     report.timings.write_ms = t.elapsed().as_secs_f64() * 1000.0;
 
+    if let Some(path) = &args.picture {
+        let t = Instant::now();
+        write_picture(path, &out, &report)?;
+        report.timings.picture_ms = t.elapsed().as_secs_f64() * 1000.0;
+    }
+
     if let Some(path) = &args.report {
         write_report(path, &report.to_json())?;
     }
@@ -275,6 +314,32 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
     } else {
         exit::OK
     })
+}
+
+/// Renders and writes the picture of a repair. A bug in the drawing loses the picture
+/// (with a warning), never the repair.
+fn write_picture(
+    path: &Path,
+    out: &holefill::io::RawMesh,
+    report: &holefill::report::RepairReport,
+) -> Result<(), Failure> {
+    let drawn = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        holefill::picture::render(out, report, &holefill::picture::Options::default()).to_png()
+    }));
+    match drawn {
+        Ok(Ok(png)) => holefill::io::write_atomic(path, &png).map_err(io_failure),
+        Ok(Err(e)) => {
+            eprintln!("warning: {}: {e}", path.display());
+            Ok(())
+        }
+        Err(_) => {
+            eprintln!(
+                "warning: {}: internal error while drawing the picture; none written",
+                path.display()
+            );
+            Ok(())
+        }
+    }
 }
 
 fn write_report(path: &Path, json: &str) -> Result<(), Failure> {

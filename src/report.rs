@@ -120,6 +120,8 @@ pub struct Timings {
     pub smooth_ms: f64,
     pub fill_ms: f64,
     pub write_ms: f64,
+    /// Rendering and writing the picture (`holefill fill --picture`; 0 without).
+    pub picture_ms: f64,
 }
 
 /// A file path with its format.
@@ -152,6 +154,21 @@ pub struct RepairReport {
     pub timings: Timings,
     pub summary: Summary,
     pub holes: Vec<HoleReport>,
+    /// Where each hole of `holes` (same order) is in the repaired mesh, for pictures of
+    /// the repair ([`crate::picture`]); not part of the log.
+    #[serde(skip)]
+    pub traces: Vec<HoleTrace>,
+}
+
+/// Where one hole is in the repaired mesh (vertex and face indices of the soup that
+/// [`crate::repair`] returns).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct HoleTrace {
+    /// The boundary loop, oriented so that a patch triangle `(v[i], v[i+1], x)` agrees
+    /// with the surrounding faces.
+    pub boundary: Vec<u32>,
+    /// The faces the hole's patch added (empty when it was not filled).
+    pub patch: std::ops::Range<u32>,
 }
 
 /// What smoothing did.
@@ -177,6 +194,7 @@ impl RepairReport {
             timings: Timings::default(),
             summary: Summary::default(),
             holes: Vec::new(),
+            traces: Vec::new(),
         }
     }
 

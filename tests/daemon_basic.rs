@@ -389,7 +389,7 @@ fn collision_overwrite_replaces_the_earlier_output_when_asked() {
     );
     assert_eq!(
         Folders::files(&f.outbox),
-        vec!["scan.obj", "scan.obj.repair.json"]
+        vec!["scan.obj", "scan.obj.repair.json", "scan.obj.repair.png"]
     );
     assert_ne!(
         fs::read_to_string(f.outbox.join("scan.obj")).unwrap(),

@@ -36,7 +36,7 @@ fn kill9_during_processing_then_restart_repairs_the_file_once() {
     assert_eq!(f.models(), vec!["k.obj"], "repaired once");
     assert_eq!(
         Folders::files(&f.outbox),
-        vec!["k.obj", "k.obj.repair.json"]
+        vec!["k.obj", "k.obj.repair.json", "k.obj.repair.png"]
     );
     let log = Folders::log(&f.outbox, "k.obj");
     assert_eq!(log["status"], "repaired");
@@ -238,7 +238,7 @@ fn a_daemon_killed_after_publishing_is_not_repaired_twice() {
     );
     assert_eq!(
         Folders::files(&f.outbox),
-        vec!["x.obj", "x.obj.repair.json"],
+        vec!["x.obj", "x.obj.repair.json", "x.obj.repair.png"],
         "no second repair"
     );
     assert_eq!(Folders::files(&f.archive), vec!["x.obj"]);
@@ -260,7 +260,7 @@ fn a_daemon_killed_between_archive_and_log_finishes_cleanly() {
     );
     assert_eq!(
         Folders::files(&f.outbox),
-        vec!["x.obj", "x.obj.repair.json"],
+        vec!["x.obj", "x.obj.repair.json", "x.obj.repair.png"],
         "{}",
         d.log()
     );

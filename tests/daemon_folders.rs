@@ -293,7 +293,7 @@ fn an_archive_that_cannot_be_written_is_never_claimed_archived_nor_repaired_twic
     );
     assert_eq!(
         Folders::files(&f.outbox),
-        vec!["x.obj", "x.obj.repair.json"],
+        vec!["x.obj", "x.obj.repair.json", "x.obj.repair.png"],
         "{}",
         d.log()
     );
@@ -341,7 +341,7 @@ fn an_immutable_archive_recovers_without_a_restart() {
     );
     assert_eq!(
         Folders::files(&f.outbox),
-        vec!["y.obj", "y.obj.repair.json"]
+        vec!["y.obj", "y.obj.repair.json", "y.obj.repair.png"]
     );
     assert_eq!(Folders::files(&f.archive), vec!["y.obj"]);
     d.signal("TERM");

@@ -46,8 +46,8 @@ fn two_daemons_200_files_each_repaired_exactly_once() {
     );
     assert_eq!(
         Folders::files(&f.outbox).len(),
-        2 * n,
-        "a log beside each model"
+        3 * n,
+        "a log and a picture beside each model"
     );
     assert!(Folders::files(&f.failed).is_empty());
     assert!(Folders::files(&f.inbox).is_empty());

@@ -37,7 +37,7 @@ fn kill_at_then_restart(f: &Folders, point: &str) {
     );
     assert_eq!(
         Folders::files(&f.outbox),
-        vec!["x.obj", "x.obj.repair.json"],
+        vec!["x.obj", "x.obj.repair.json", "x.obj.repair.png"],
         "{point}\n{}",
         d2.log()
     );

@@ -30,8 +30,9 @@ fn a_writer_that_holds_the_file_open_and_pauses_10_s_is_waited_for() {
     assert_eq!(Folders::files(&f.inbox), vec!["paused.obj"], "{}", d.log());
     w.write_all(&obj.as_bytes()[half..]).unwrap();
     drop(w);
+    // the log is published last (after the archive)
     assert!(
-        wait_until(LONG, || f.archive.join("paused.obj").is_file()),
+        wait_until(LONG, || f.outbox.join("paused.obj.repair.json").is_file()),
         "{}",
         d.log()
     );

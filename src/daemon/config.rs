@@ -66,6 +66,9 @@ pub struct FileConfig {
     pub on_success: Option<OnSuccess>,
     pub collision: Option<Collision>,
     pub log_format: Option<LogFormat>,
+    pub picture: Option<bool>,
+    pub index_entries: Option<usize>,
+    pub metrics: Option<String>,
 }
 
 impl FileConfig {
@@ -121,6 +124,24 @@ pub struct Settings {
     pub on_success: OnSuccess,
     pub collision: Collision,
     pub log_format: LogFormat,
+    /// Write `NAME.repair.png` beside each repaired file's log.
+    pub picture: bool,
+    /// Files listed in `OUTBOX/index.html`; 0: no index.
+    pub index_entries: usize,
+    /// Serve Prometheus metrics at `http://ADDR/metrics`.
+    pub metrics: Option<std::net::SocketAddr>,
+}
+
+/// The address of `--metrics` / `metrics = ...`: `HOST:PORT`, `[V6]:PORT`, or a port
+/// alone (on 127.0.0.1).
+pub fn metrics_addr(text: &str) -> Result<std::net::SocketAddr> {
+    let t = text.trim();
+    if let Ok(port) = t.parse::<u16>() {
+        return Ok(std::net::SocketAddr::from(([127, 0, 0, 1], port)));
+    }
+    t.parse().map_err(|_| {
+        anyhow::anyhow!("metrics = {t:?}: expected an address such as 127.0.0.1:9464 (or a port)")
+    })
 }
 
 impl Settings {
@@ -219,6 +240,12 @@ impl Settings {
                 .log_format
                 .or(file.log_format)
                 .unwrap_or(LogFormat::Text),
+            picture: args.picture.or(file.picture).unwrap_or(true),
+            index_entries: args.index_entries.or(file.index_entries).unwrap_or(200),
+            metrics: match args.metrics.as_deref().or(file.metrics.as_deref()) {
+                Some(a) => Some(metrics_addr(a)?),
+                None => None,
+            },
         };
         s.validate()?;
         Ok(s)
@@ -266,6 +293,9 @@ impl Settings {
         if self.log_format != new.log_format {
             v.push("log_format");
         }
+        if self.metrics != new.metrics {
+            v.push("metrics");
+        }
         v
     }
 
@@ -279,6 +309,7 @@ impl Settings {
             workers: self.workers,
             poll: self.poll,
             log_format: self.log_format,
+            metrics: self.metrics,
             ..new.clone()
         }
     }
@@ -369,6 +400,9 @@ mod tests {
             "on_success",
             "collision",
             "log_format",
+            "picture",
+            "index_entries",
+            "metrics",
         ] {
             // `## ` lines are prose, `# key = value` lines are the documented keys
             let uncommented: String = text
@@ -384,6 +418,42 @@ mod tests {
                 "config/holefill.toml does not document `{key}`"
             );
         }
+    }
+
+    #[test]
+    fn picture_index_and_metrics_keys() {
+        let s = Settings::resolve(&args(&[]), &FileConfig::default()).unwrap();
+        assert!(s.picture, "pictures are on by default");
+        assert_eq!(s.index_entries, 200);
+        assert_eq!(s.metrics, None, "metrics are off by default");
+        let file = FileConfig {
+            picture: Some(false),
+            metrics: Some("9464".into()),
+            ..Default::default()
+        };
+        let s = Settings::resolve(&args(&[]), &file).unwrap();
+        assert!(!s.picture);
+        assert_eq!(
+            s.metrics,
+            Some("127.0.0.1:9464".parse().unwrap()),
+            "a port alone: loopback"
+        );
+        let s = Settings::resolve(
+            &args(&[
+                "--picture",
+                "true",
+                "--metrics",
+                "[::1]:9000",
+                "--index-entries",
+                "0",
+            ]),
+            &file,
+        )
+        .unwrap();
+        assert!(s.picture);
+        assert_eq!(s.index_entries, 0);
+        assert_eq!(s.metrics, Some("[::1]:9000".parse().unwrap()));
+        assert!(Settings::resolve(&args(&["--metrics", "localhost"]), &file).is_err());
     }
 
     #[test]

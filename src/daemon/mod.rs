@@ -30,11 +30,13 @@ mod claim;
 mod config;
 mod fsops;
 mod hooks;
+pub mod index;
 mod queue;
 mod sniff;
 mod watch;
 mod worker;
 
+use crate::metrics;
 use anyhow::{Context, Result};
 use claim::{Home, Identity, Job, Layout, Phase};
 use config::{Collision, LogFormat, OnSuccess, Settings};
@@ -127,6 +129,16 @@ pub struct WatchArgs {
     /// Journal format on stderr [default: text].
     #[arg(long, value_enum)]
     pub log_format: Option<LogFormat>,
+    /// Write a picture of each repair beside its log [default: true].
+    #[arg(long, value_name = "BOOL")]
+    pub picture: Option<bool>,
+    /// Files listed in OUTBOX/index.html; 0: no index [default: 200].
+    #[arg(long)]
+    pub index_entries: Option<usize>,
+    /// Serve Prometheus metrics at http://ADDR/metrics (HOST:PORT, or a port for
+    /// 127.0.0.1) [default: off].
+    #[arg(long, value_name = "ADDR")]
+    pub metrics: Option<String>,
 }
 
 /// Runs the daemon until SIGTERM or SIGINT (then returns `Ok` once every claimed file
@@ -256,6 +268,8 @@ struct Daemon {
     errors: HashMap<String, Instant>,
     folders_checked: Option<Instant>,
     folders_ok: bool,
+    /// `OUTBOX/index.html` (`None`: index_entries = 0).
+    index: Option<index::Index>,
 }
 
 impl Daemon {
@@ -277,6 +291,13 @@ impl Daemon {
         })?);
         worker::probe_limits(settings.memory_limit_mb)?;
         let (policy, policy_text) = snapshot_policy(&settings, &home.tmp, 0)?;
+        if let Some(addr) = settings.metrics {
+            let m = metrics::init("watch");
+            let bound = metrics::serve(addr, m)
+                .await
+                .with_context(|| format!("cannot serve the metrics on {addr}"))?;
+            tracing::info!("metrics at http://{bound}/metrics");
+        }
         let exe = std::env::current_exe().context("cannot find the holefill executable")?;
         let cores = std::thread::available_parallelism()
             .map(|n| n.get())
@@ -346,7 +367,15 @@ impl Daemon {
             errors: HashMap::new(),
             folders_checked: None,
             folders_ok: true,
+            index: None,
         };
+        if d.settings.index_entries > 0 {
+            d.index = Some(index::Index::load(
+                &d.layout.outbox,
+                &d.layout.failed,
+                d.settings.index_entries,
+            ));
+        }
         d.rescan();
         tracing::info!(
             inbox = %d.layout.inbox.display(),
@@ -425,6 +454,14 @@ impl Daemon {
                     self.rescan();
                 }
                 self.dispatch();
+            }
+            if let Some(ix) = self.index.as_mut() {
+                ix.flush(false);
+            }
+            if let Some(m) = metrics::global() {
+                m.waiting
+                    .set((self.pending.len() + self.again.len()) as i64);
+                m.in_flight.set(self.working.len() as i64);
             }
             let status = self.status();
             if status != self.last_status {
@@ -816,6 +853,12 @@ impl Daemon {
             } => {
                 self.repaired += 1;
                 self.retries.remove(&job.name);
+                self.file_done(
+                    &self.layout.outbox.join(format!("{output}.repair.json")),
+                    None,
+                    secs,
+                    job.rec.stamp.map(|s| s.size),
+                );
                 let name = job.shown();
                 let output = shown(OsStr::new(&output));
                 let how = if resumed {
@@ -842,6 +885,14 @@ impl Daemon {
             } => {
                 self.failed += 1;
                 self.retries.remove(&job.name);
+                if let Phase::Failed { dest, .. } = &job.rec.phase {
+                    self.file_done(
+                        &self.layout.failed.join(format!("{dest}.repair.json")),
+                        Some(stage.as_str()),
+                        secs,
+                        job.rec.stamp.map(|s| s.size),
+                    );
+                }
                 let name = job.shown();
                 tracing::warn!(
                     file = %name,
@@ -853,6 +904,9 @@ impl Daemon {
                 );
             }
             Done::Again { job, error } => {
+                if let Some(m) = metrics::global() {
+                    m.retry("crashed");
+                }
                 tracing::warn!(file = %job.shown(), attempt = job.attempt, "{}: attempt {} of {} failed: {error}", job.shown(), job.attempt, self.settings.max_attempts);
                 let next = Job {
                     attempt: job.attempt + 1,
@@ -897,6 +951,9 @@ impl Daemon {
                 let name = job.shown();
                 let back = shown(&inbox_name);
                 let now = Instant::now();
+                if let (Some(m), None) = (metrics::global(), self.stopping) {
+                    m.retry(if changed { "changed" } else { "retryable" });
+                }
                 if self.watcher.is_some() && changed {
                     self.expect.insert(inbox_name.clone(), Seen::Changed);
                 }
@@ -928,6 +985,24 @@ impl Daemon {
             }
         }
         self.release_adopted();
+    }
+
+    /// A file's end (repaired, or failed at `stage`), its log published at `log`: into
+    /// the index and the metrics.
+    fn file_done(&mut self, log: &Path, stage: Option<&str>, secs: f64, bytes: Option<u64>) {
+        let m = metrics::global();
+        if self.index.is_none() && m.is_none() {
+            return;
+        }
+        let read = index::read_log(log);
+        if let Some(ix) = self.index.as_mut() {
+            ix.add(log, read.as_ref());
+        }
+        match (m, stage) {
+            (Some(m), Some(stage)) => m.failed(stage, secs, bytes),
+            (Some(m), None) => m.repaired(read.as_ref().map(|(v, _)| v), secs, bytes),
+            (None, _) => {}
+        }
     }
 
     fn begin_stop(&mut self, why: &str) {
@@ -1045,6 +1120,9 @@ impl Daemon {
         }
         claim::ledger_clean(&self.layout);
         let _ = fsops::fsync_dir(&self.layout.inbox);
+        if let Some(ix) = self.index.as_mut() {
+            ix.flush(true);
+        }
         tracing::info!(
             repaired = self.repaired,
             failed = self.failed,

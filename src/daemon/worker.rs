@@ -176,6 +176,7 @@ pub async fn process(ctx: Arc<RunCtx>, job: Job, mut cancel: watch::Receiver<boo
     let child_log = job.tmp(".child.json");
     let _ = fs::remove_file(&out);
     let _ = fs::remove_file(&child_log);
+    let _ = fs::remove_file(job.tmp(PICTURE));
     let (end, stderr) = run_child(&ctx, &job, &file, &ext, &out, &child_log, &mut cancel).await;
     let shown_input = fsops::shown(ctx.layout.inbox.join(&job.name).as_os_str());
     let msg = stderr_message(&stderr).replace("/proc/self/fd/0", &shown_input);
@@ -252,6 +253,12 @@ pub async fn process(ctx: Arc<RunCtx>, job: Job, mut cancel: watch::Receiver<boo
             blocking(c2, move |c| put_back(&c, job, Some(e), false)).await
         }
         end => {
+            if let Some(m) = crate::metrics::global() {
+                match end {
+                    ChildEnd::Timeout(_) => m.timeouts.inc(),
+                    _ => m.crashes.inc(),
+                };
+            }
             let why = crash_reason(&ctx, end, &msg);
             let _ = fs::remove_file(&out);
             let _ = fs::remove_file(&child_log);
@@ -555,6 +562,9 @@ async fn run_child(
     if let Some(p) = &ctx.policy {
         cmd.arg("--policy").arg(p);
     }
+    if ctx.settings.picture {
+        cmd.arg("--picture").arg(job.tmp(PICTURE));
+    }
     // the read limits, enforced by the reader too: the header sniff cannot count
     // vertices, nor triangles of fanned polygons
     let s = &ctx.settings;
@@ -583,6 +593,9 @@ async fn run_child(
         Ok(c) => c,
         Err(e) => return (ChildEnd::SpawnError(e), Vec::new()),
     };
+    if let Some(m) = crate::metrics::global() {
+        m.attempts.inc();
+    }
     let pid = child.id();
     // keep only the tail of stderr, however much the worker writes
     let reader = child.stderr.take().map(|mut err| {
@@ -776,7 +789,7 @@ fn commit(ctx: &RunCtx, mut job: Job, t: Times, model: &Path, child_log: &Path, 
     let output = fsops::free_name(
         &l.outbox,
         &name,
-        &[".repair.json"],
+        &[".repair.json", ".repair.png"],
         when,
         ctx.settings.collision,
         0,
@@ -905,7 +918,7 @@ fn resume_repaired(
                 let cand = fsops::free_name(
                     &l.outbox,
                     &name,
-                    &[".repair.json"],
+                    &[".repair.json", ".repair.png"],
                     SystemTime::now(),
                     Collision::Timestamp,
                     skip,
@@ -1047,6 +1060,7 @@ fn resume_repaired(
                 }
                 continue;
             }
+            publish_picture(&job, &l.outbox.join(format!("{output}.repair.png")), rule);
             match fsops::publish(&tmp_log, &log_path, rule) {
                 Ok(()) => {}
                 Err(e) if e.kind() == io::ErrorKind::AlreadyExists => continue,
@@ -1061,6 +1075,7 @@ fn resume_repaired(
         for s in [
             ".child.json".to_string(),
             ".log.json".into(),
+            PICTURE.into(),
             format!(".{}", ext_of(&job)),
         ] {
             let _ = fs::remove_file(job.tmp(&s));
@@ -1081,6 +1096,25 @@ fn resume_repaired(
     )
 }
 
+/// The worker's picture of the repair, in the job's temporary folder.
+const PICTURE: &str = ".png";
+
+/// Moves the worker's picture (if it drew one) to `dst`, beside where the log goes
+/// next. Best effort: a repair is complete without its picture, so a name taken by
+/// someone else or an error loses only the picture (with a warning). After a crash the
+/// picture is already there, or still in the temporary folder, or lost with that
+/// folder.
+fn publish_picture(job: &Job, dst: &Path, rule: Collision) {
+    let tmp = job.tmp(PICTURE);
+    if !fs::symlink_metadata(&tmp).is_ok_and(|m| m.is_file()) {
+        return;
+    }
+    if let Err(e) = fsops::publish(&tmp, dst, rule) {
+        tracing::warn!(file = %job.shown(), "{}: the picture is not published as {}: {e}", job.shown(), dst.display());
+        let _ = fs::remove_file(&tmp);
+    }
+}
+
 /// Sends the file, untouched, to the failed folder with its log (`kept` false: not a
 /// regular file, removed instead): records the decision, then [`finish_failed`].
 #[allow(clippy::too_many_arguments)]
@@ -1094,7 +1128,11 @@ fn fail(
     exit: Option<i32>,
     kept: bool,
 ) -> Done {
-    for s in [".child.json".to_string(), format!(".{}", ext_of(&job))] {
+    for s in [
+        ".child.json".to_string(),
+        PICTURE.into(),
+        format!(".{}", ext_of(&job)),
+    ] {
         let _ = fs::remove_file(job.tmp(&s));
     }
     let name = match job.name_str() {
@@ -1263,6 +1301,7 @@ fn put_back(ctx: &RunCtx, job: Job, error: Option<String>, changed: bool) -> Don
     for s in [
         ".child.json".to_string(),
         ".log.json".into(),
+        PICTURE.into(),
         format!(".{}", ext_of(&job)),
     ] {
         let _ = fs::remove_file(job.tmp(&s));

@@ -12,7 +12,7 @@ use crate::io::RawMesh;
 use crate::mesh::{Mesh, VertexId};
 use crate::patch::Hole;
 use crate::policy::Policy;
-use crate::report::{Counts, HoleReport, HoleStatus, RepairReport};
+use crate::report::{Counts, HoleReport, HoleStatus, HoleTrace, RepairReport};
 use crate::smooth;
 use clean::{components, remove_teeth, split_long_edges};
 use std::time::Instant;
@@ -62,7 +62,12 @@ pub fn repair(raw: &RawMesh, policy: &Policy) -> Result<(RawMesh, RepairReport),
     }
 
     let t = Instant::now();
-    report.holes = fill_all(&mut mesh, policy, &mut report.resolved.degenerate_loops);
+    report.holes = fill_all(
+        &mut mesh,
+        policy,
+        &mut report.resolved.degenerate_loops,
+        &mut report.traces,
+    );
     report.timings.fill_ms = t.elapsed().as_secs_f64() * 1000.0;
     report.after = counts(&mesh);
     report.summarise();
@@ -80,7 +85,12 @@ fn counts(mesh: &Mesh) -> Counts {
 /// Finds the holes, applies the outer-border rule and fills the rest. (Not inlined:
 /// profiles and instruction counts of the filling find it by name.)
 #[inline(never)]
-fn fill_all(mesh: &mut Mesh, policy: &Policy, degenerate: &mut usize) -> Vec<HoleReport> {
+fn fill_all(
+    mesh: &mut Mesh,
+    policy: &Policy,
+    degenerate: &mut usize,
+    traces: &mut Vec<HoleTrace>,
+) -> Vec<HoleReport> {
     let loops = mesh.topo.boundary_loops();
     let diag = mesh.bbox_diagonal();
     let holes: Vec<Hole> = loops
@@ -138,10 +148,13 @@ fn fill_all(mesh: &mut Mesh, policy: &Policy, degenerate: &mut usize) -> Vec<Hol
         });
     mesh.reserve(nv, nf);
     let mut out = Vec::with_capacity(holes.len());
+    traces.reserve(holes.len());
     for ((hole, rule), proposal) in holes.iter().zip(skip).zip(proposals) {
         if hole.len() < 3 {
             *degenerate += 1;
         }
+        // patches are appended to the faces, one hole after the other
+        let first_face = mesh.num_faces() as u32;
         match (rule, proposal) {
             (Some(rule), _) => out.push(HoleReport {
                 id: hole.id,
@@ -161,6 +174,10 @@ fn fill_all(mesh: &mut Mesh, policy: &Policy, degenerate: &mut usize) -> Vec<Hol
             (None, Some(p)) => out.push(dispatch::finish_hole(mesh, hole, policy, &mut checker, p)),
             (None, None) => out.push(dispatch::fill_hole(mesh, hole, policy, &mut checker)),
         }
+        traces.push(HoleTrace {
+            boundary: hole.vertices.iter().map(|v| v.0).collect(),
+            patch: first_face..(mesh.num_faces() as u32).max(first_face),
+        });
     }
     out
 }

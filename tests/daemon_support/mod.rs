@@ -42,14 +42,15 @@ impl Folders {
     pub fn root(&self) -> &Path {
         self.tmp.path()
     }
-    /// Regular files (not dot-files) directly in `dir`, sorted.
+    /// Regular files (not dot-files) directly in `dir`, sorted; the outbox's
+    /// `index.html` left out (it lists files, it is not one's output).
     pub fn files(dir: &Path) -> Vec<String> {
         let mut v: Vec<String> = fs::read_dir(dir)
             .map(|rd| {
                 rd.flatten()
                     .filter(|e| e.file_type().map(|t| t.is_file()).unwrap_or(false))
                     .map(|e| e.file_name().to_string_lossy().into_owned())
-                    .filter(|n| !n.starts_with('.'))
+                    .filter(|n| !n.starts_with('.') && n != "index.html")
                     .collect()
             })
             .unwrap_or_default();
@@ -110,11 +111,11 @@ impl Folders {
         v.sort();
         v
     }
-    /// Models (not logs) in the outbox.
+    /// Models (not logs, not pictures) in the outbox.
     pub fn models(&self) -> Vec<String> {
         Folders::files(&self.outbox)
             .into_iter()
-            .filter(|n| !n.ends_with(".repair.json"))
+            .filter(|n| !n.ends_with(".repair.json") && !n.ends_with(".repair.png"))
             .collect()
     }
     pub fn log(dir: &Path, name: &str) -> Value {

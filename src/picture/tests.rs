@@ -1,0 +1,185 @@
+use super::*;
+use crate::policy::Policy;
+use crate::testutil::sphere_cap_removed;
+use std::path::Path;
+
+/// A sphere of radius 1 (1,280 faces) with a hole of `cap` radians around +z and, when
+/// `second` is given, another around +x.
+fn holed_sphere(cap: f64, second: Option<f64>) -> RawMesh {
+    let mut raw = sphere_cap_removed(3, 1.0, DVec3::Z, cap);
+    if let Some(c) = second {
+        let pos = raw.positions.clone();
+        raw.faces.retain(|f| {
+            let m = f
+                .iter()
+                .map(|&v| pos[v as usize])
+                .sum::<DVec3>()
+                .normalize();
+            m.dot(DVec3::X) < c.cos()
+        });
+    }
+    raw
+}
+
+fn is(c: [u8; 3], want: [u8; 3]) -> bool {
+    c == want
+}
+
+/// Pixels of exactly colour `c` in the rectangle.
+fn count(p: &Picture, x0: usize, y0: usize, w: usize, h: usize, c: [u8; 3]) -> usize {
+    let mut n = 0;
+    for y in y0..(y0 + h).min(p.height) {
+        for x in x0..(x0 + w).min(p.width) {
+            if p.pixel(x, y).is_some_and(|q| is(q, c)) {
+                n += 1;
+            }
+        }
+    }
+    n
+}
+
+/// Where the k-th close-up's tiles are (before, after): top-left corners and size.
+fn tiles(p: &Picture, k: usize) -> ((usize, usize), (usize, usize), usize) {
+    let tile = p.width / 4;
+    let over_h = p.width * 5 / 8;
+    let x = (k % 2) * 2 * tile;
+    let y = HEADER + over_h + (k / 2) * (TILE_BAND + tile) + TILE_BAND;
+    ((x, y), (x + tile, y), tile)
+}
+
+#[test]
+fn a_filled_hole_is_outlined_green_and_its_patch_shows_only_after() {
+    let raw = holed_sphere(0.5, None);
+    let (out, report) = crate::repair(&raw, &Policy::default_policy()).unwrap();
+    assert_eq!(report.summary.filled, 1, "{:?}", report.summary);
+    assert_eq!(report.traces.len(), 1);
+    let t = &report.traces[0];
+    assert!(t.boundary.len() >= 10);
+    assert_eq!(
+        (t.patch.end - t.patch.start) as usize,
+        report.holes[0].added_faces
+    );
+    assert_eq!(
+        t.patch.end as usize,
+        out.faces.len(),
+        "the patch is appended"
+    );
+
+    let pic = render(&out, &report, &Options::default());
+    assert_eq!(pic.width, 640);
+    let over_h = 640 * 5 / 8;
+    let tile = 160;
+    assert_eq!(
+        pic.height,
+        HEADER + over_h + TILE_BAND + tile,
+        "one close-up row"
+    );
+    assert_eq!(pic.rgb.len(), pic.width * pic.height * 3);
+
+    // the overview: the outline in the filled colour, the surface lit
+    let green = count(&pic, 0, HEADER, pic.width, over_h, FILLED);
+    assert!(green > 200, "outline pixels: {green}");
+    let lit = pic
+        .rgb
+        .chunks(3)
+        .filter(|c| c[0] > 120 && c[1] > 120 && c[2] > 110)
+        .count();
+    assert!(lit > 10_000, "surface pixels: {lit}");
+
+    // the close-up: the middle of the hole shows the inside (bluish back faces) before,
+    // the patch (green) after
+    let ((bx, by), (ax, ay), s) = tiles(&pic, 0);
+    let mid = s / 2;
+    let before = pic.pixel(bx + mid, by + mid).unwrap();
+    let after = pic.pixel(ax + mid, ay + mid).unwrap();
+    assert!(
+        before[2] > before[0],
+        "inside seen through the hole: {before:?}"
+    );
+    assert!(
+        after[1] > after[0] + 40 && after[1] > after[2] + 20,
+        "the patch: {after:?}"
+    );
+    // the outline in both tiles
+    assert!(count(&pic, bx, by, s, s, FILLED) > 50);
+    assert!(count(&pic, ax, ay, s, s, FILLED) > 50);
+
+    let png = pic.to_png().unwrap();
+    assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+    assert!(png.len() > 1000 && png.len() < pic.rgb.len());
+}
+
+#[test]
+fn a_skipped_hole_is_amber_and_every_hole_is_outlined() {
+    // the big hole is the longest loop and exceeds border.max_vertices: skipped
+    let raw = holed_sphere(0.9, Some(0.35));
+    let policy =
+        Policy::from_toml_str("[border]\nmax_vertices = 20\n", Path::new("test.toml")).unwrap();
+    let (out, report) = crate::repair(&raw, &policy).unwrap();
+    assert_eq!(
+        (report.summary.filled, report.summary.skipped),
+        (1, 1),
+        "{:?}",
+        report.holes
+    );
+    let pic = render(&out, &report, &Options::default());
+    let over_h = pic.width * 5 / 8;
+    assert!(count(&pic, 0, HEADER, pic.width, over_h, SKIPPED) > 100);
+    assert!(count(&pic, 0, HEADER, pic.width, over_h, FILLED) > 30);
+    // two close-ups on one row: the filled hole's patch, the skipped hole open
+    assert_eq!(pic.height, HEADER + over_h + TILE_BAND + pic.width / 4);
+    let skipped = report
+        .holes
+        .iter()
+        .position(|h| h.status == HoleStatus::Skipped)
+        .unwrap();
+    let ((_, _), (ax, ay), s) = tiles(&pic, skipped);
+    let mid = pic.pixel(ax + s / 2, ay + s / 2).unwrap();
+    assert!(mid[2] >= mid[1], "a skipped hole stays open after: {mid:?}");
+    assert!(count(&pic, ax, ay, s, s, SKIPPED) > 50);
+}
+
+#[test]
+fn without_holes_only_the_overview_is_drawn() {
+    let raw = crate::testutil::icosphere(2, 1.0);
+    let (out, report) = crate::repair(&raw, &Policy::default_policy()).unwrap();
+    assert_eq!(report.summary.holes, 0);
+    let pic = render(&out, &report, &Options::default());
+    assert_eq!(pic.height, HEADER + pic.width * 5 / 8);
+    // the header says "0 filled" in green; the model has no outline
+    assert_eq!(count(&pic, 0, HEADER, pic.width, pic.height, FILLED), 0);
+}
+
+#[test]
+fn the_overview_of_a_huge_mesh_draws_a_bounded_share_of_its_faces() {
+    // max_overview_faces far below the face count: every k-th face is drawn, and the
+    // surface still covers the sphere's disc (faces are smaller than pixels there)
+    let raw = holed_sphere(0.5, None);
+    let (out, report) = crate::repair(&raw, &Policy::default_policy()).unwrap();
+    let full = render(&out, &report, &Options::default());
+    let opts = Options {
+        max_overview_faces: out.faces.len() / 3,
+        width: 320,
+        ..Options::default()
+    };
+    let few = render(&out, &report, &opts);
+    assert_eq!(few.width, 320);
+    let lit = |p: &Picture| p.rgb.chunks(3).filter(|c| c[0] > 120 && c[1] > 120).count();
+    assert!(lit(&few) > 0 && lit(&few) < lit(&full));
+}
+
+#[test]
+fn bad_indices_and_non_finite_points_do_not_panic() {
+    let raw = holed_sphere(0.5, None);
+    let (mut out, mut report) = crate::repair(&raw, &Policy::default_policy()).unwrap();
+    out.faces.push([0, 1, u32::MAX]);
+    out.positions[0] = DVec3::splat(f64::NAN);
+    report.traces[0].boundary.push(u32::MAX);
+    report.traces[0].patch.end += 1000;
+    let pic = render(&out, &report, &Options::default());
+    assert!(pic.width > 0 && pic.height > 0);
+    // a report without traces (the hole is then not drawn)
+    report.traces.clear();
+    let pic = render(&out, &report, &Options::default());
+    assert_eq!(pic.height, HEADER + pic.width * 5 / 8);
+}
