@@ -164,7 +164,7 @@ fn report_lists_every_log_newest_first() {
 /// its picture shows every filled hole's outline. Bench data is not copied into the
 /// repository, so this runs where `../shared` is (CI runs it).
 #[test]
-#[ignore = "needs ../shared/bench-data"]
+#[ignore = "needs ../shared"]
 fn the_bunny_scans_picture_shows_its_holes() {
     let bunny = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../shared/bench-data/meshes/stanford-bunny.obj");
