@@ -50,7 +50,7 @@ fn tiles(p: &Picture, k: usize) -> ((usize, usize), (usize, usize), usize) {
 #[test]
 fn a_filled_hole_is_outlined_green_and_its_patch_shows_only_after() {
     let raw = holed_sphere(0.5, None);
-    let (out, report) = crate::repair(&raw, &Policy::default_policy()).unwrap();
+    let (out, report) = crate::pipeline::repair(&raw, &Policy::default_policy()).unwrap();
     assert_eq!(report.summary.filled, 1, "{:?}", report.summary);
     assert_eq!(report.traces.len(), 1);
     let t = &report.traces[0];
@@ -115,7 +115,7 @@ fn a_skipped_hole_is_amber_and_every_hole_is_outlined() {
     let raw = holed_sphere(0.9, Some(0.35));
     let policy =
         Policy::from_toml_str("[border]\nmax_vertices = 20\n", Path::new("test.toml")).unwrap();
-    let (out, report) = crate::repair(&raw, &policy).unwrap();
+    let (out, report) = crate::pipeline::repair(&raw, &policy).unwrap();
     assert_eq!(
         (report.summary.filled, report.summary.skipped),
         (1, 1),
@@ -142,7 +142,7 @@ fn a_skipped_hole_is_amber_and_every_hole_is_outlined() {
 #[test]
 fn without_holes_only_the_overview_is_drawn() {
     let raw = crate::testutil::icosphere(2, 1.0);
-    let (out, report) = crate::repair(&raw, &Policy::default_policy()).unwrap();
+    let (out, report) = crate::pipeline::repair(&raw, &Policy::default_policy()).unwrap();
     assert_eq!(report.summary.holes, 0);
     let pic = render(&out, &report, &Options::default());
     assert_eq!(pic.height, HEADER + pic.width * 5 / 8);
@@ -155,7 +155,7 @@ fn the_overview_of_a_huge_mesh_draws_a_bounded_share_of_its_faces() {
     // max_overview_faces far below the face count: every k-th face is drawn, and the
     // surface still covers the sphere's disc (faces are smaller than pixels there)
     let raw = holed_sphere(0.5, None);
-    let (out, report) = crate::repair(&raw, &Policy::default_policy()).unwrap();
+    let (out, report) = crate::pipeline::repair(&raw, &Policy::default_policy()).unwrap();
     let full = render(&out, &report, &Options::default());
     let opts = Options {
         max_overview_faces: out.faces.len() / 3,
@@ -171,7 +171,7 @@ fn the_overview_of_a_huge_mesh_draws_a_bounded_share_of_its_faces() {
 #[test]
 fn bad_indices_and_non_finite_points_do_not_panic() {
     let raw = holed_sphere(0.5, None);
-    let (mut out, mut report) = crate::repair(&raw, &Policy::default_policy()).unwrap();
+    let (mut out, mut report) = crate::pipeline::repair(&raw, &Policy::default_policy()).unwrap();
     out.faces.push([0, 1, u32::MAX]);
     out.positions[0] = DVec3::splat(f64::NAN);
     report.traces[0].boundary.push(u32::MAX);
