@@ -26,7 +26,7 @@ pub enum RepairError {
     Empty,
     /// The input's topology could not be resolved into a valid mesh.
     #[error("the mesh topology could not be resolved: {0}")]
-    Topology(String),
+    Topology(#[from] crate::mesh::TopologyError),
 }
 
 /// Repairs a triangle soup: builds the mesh, cleans the boundary, smooths if the
@@ -40,19 +40,19 @@ pub fn repair(raw: &RawMesh, policy: &Policy) -> Result<(RawMesh, RepairReport),
     if mesh.num_faces() == 0 {
         return Err(RepairError::Empty);
     }
-    mesh.validate().map_err(RepairError::Topology)?;
+    mesh.validate()?;
     report.before = counts(&mesh);
 
     if policy.clean.remove_teeth {
         let (m, removed) = remove_teeth(mesh);
         mesh = m;
         report.resolved.tooth_faces_removed = removed;
-        mesh.validate().map_err(RepairError::Topology)?;
+        mesh.validate()?;
     }
     if policy.clean.split_long_edges > 0.0 {
         report.resolved.long_edges_split =
             split_long_edges(&mut mesh, policy.clean.split_long_edges);
-        mesh.validate().map_err(RepairError::Topology)?;
+        mesh.validate()?;
     }
 
     if policy.smooth.enabled {
