@@ -378,6 +378,7 @@ impl Mesh {
             precision: template.precision,
             encoding: template.encoding,
             notes: Vec::new(),
+            attrs: Default::default(),
         }
     }
 

@@ -11,6 +11,7 @@
 //! vertices added by the builder (copies of split non-manifold vertices) or by hole
 //! filling are appended.
 
+pub mod attributes;
 mod build;
 mod error;
 mod ids;

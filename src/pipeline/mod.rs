@@ -66,7 +66,11 @@ pub fn repair(raw: &RawMesh, policy: &Policy) -> Result<(RawMesh, RepairReport),
     report.timings.fill_ms = t.elapsed().as_secs_f64() * 1000.0;
     report.after = counts(&mesh);
     report.summarise();
-    Ok((mesh.to_raw(raw), report))
+    let t = Instant::now();
+    let (out, attributes) = crate::mesh::attributes::carry(&mesh, raw);
+    report.attributes = attributes;
+    report.timings.attributes_ms = t.elapsed().as_secs_f64() * 1000.0;
+    Ok((out, report))
 }
 
 fn counts(mesh: &Mesh) -> Counts {
