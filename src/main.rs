@@ -1,9 +1,11 @@
 //! The `holefill` command: `fill` (one-shot), `check-policy`, `watch` (the daemon),
-//! `report` (a table of repair logs).
+//! `worker`, `submit`, `results` (the NATS work queue), `report` (a table of repair
+//! logs).
 #![forbid(unsafe_code)]
 
 mod daemon;
 mod metrics;
+mod worker;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -56,6 +58,12 @@ enum Cmd {
     Watch(daemon::WatchArgs),
     /// Summarise the repair logs (`*.repair.json`) of a folder as a table, newest first.
     Report(ReportArgs),
+    /// Repair scans from a NATS JetStream work queue (see docs/worker.md).
+    Worker(worker::WorkerArgs),
+    /// Upload meshes and put them on the work queue.
+    Submit(worker::SubmitArgs),
+    /// Download the finished scans of the work queue into a folder.
+    Results(worker::ResultsArgs),
 }
 
 #[derive(clap::Args)]
@@ -138,6 +146,20 @@ fn main() -> ExitCode {
             }
         },
         Cmd::Report(args) => ExitCode::from(run_report(&args)),
+        Cmd::Worker(args) => queue_exit(worker::run_worker(args)),
+        Cmd::Submit(args) => queue_exit(worker::run_submit(args)),
+        Cmd::Results(args) => queue_exit(worker::run_results(args)),
+    }
+}
+
+/// Exit status of the queue commands: 0, or 1 with the error.
+fn queue_exit(r: anyhow::Result<()>) -> ExitCode {
+    match r {
+        Ok(()) => ExitCode::from(exit::OK),
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(exit::USAGE)
+        }
     }
 }
 

@@ -69,6 +69,10 @@ pub struct FileConfig {
     pub picture: Option<bool>,
     pub index_entries: Option<usize>,
     pub metrics: Option<String>,
+    /// Forward claimed files to this NATS server's work queue (`watch --forward`).
+    pub forward: Option<String>,
+    /// The queue (`holefill worker`, `submit`, `results`): see crate::worker::config.
+    pub nats: Option<crate::worker::config::NatsFile>,
 }
 
 impl FileConfig {
@@ -130,6 +134,10 @@ pub struct Settings {
     pub index_entries: usize,
     /// Serve Prometheus metrics at `http://ADDR/metrics`.
     pub metrics: Option<std::net::SocketAddr>,
+    /// `Some(url)`: the gateway (repairs on the work queue at `url`).
+    pub forward: Option<String>,
+    /// The queue's names and settings (the config's `[nats]` section).
+    pub nats: crate::worker::config::NatsFile,
 }
 
 /// The address of `--metrics` / `metrics = ...`: `HOST:PORT`, `[V6]:PORT`, or a port
@@ -182,7 +190,10 @@ impl Settings {
             .or_else(|| file.archive.clone())
             .unwrap_or_else(|| sibling("archive"));
         let inbox = inbox.unwrap_or_else(|| PathBuf::from("./inbox"));
-        let workers = match args.workers.or(file.workers).unwrap_or(0) {
+        let forward = args.forward.clone().or_else(|| file.forward.clone());
+        // a gateway's workers are files in flight on the queue, not local children
+        let default_workers = if forward.is_some() { 64 } else { 0 };
+        let workers = match args.workers.or(file.workers).unwrap_or(default_workers) {
             0 => std::thread::available_parallelism()
                 .map(|n| n.get())
                 .unwrap_or(1),
@@ -246,6 +257,8 @@ impl Settings {
                 Some(a) => Some(metrics_addr(a)?),
                 None => None,
             },
+            forward,
+            nats: file.nats.clone().unwrap_or_default(),
         };
         s.validate()?;
         Ok(s)
@@ -296,6 +309,12 @@ impl Settings {
         if self.metrics != new.metrics {
             v.push("metrics");
         }
+        if self.forward != new.forward {
+            v.push("forward");
+        }
+        if self.nats != new.nats {
+            v.push("nats");
+        }
         v
     }
 
@@ -310,6 +329,8 @@ impl Settings {
             poll: self.poll,
             log_format: self.log_format,
             metrics: self.metrics,
+            forward: self.forward.clone(),
+            nats: self.nats.clone(),
             ..new.clone()
         }
     }
@@ -403,6 +424,7 @@ mod tests {
             "picture",
             "index_entries",
             "metrics",
+            "forward",
         ] {
             // `## ` lines are prose, `# key = value` lines are the documented keys
             let uncommented: String = text

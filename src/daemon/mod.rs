@@ -26,10 +26,11 @@
 //! Every file name that reaches the journal goes through [`fsops::shown`]: one line of
 //! printable text, whatever bytes the name holds.
 
+pub mod child;
 mod claim;
-mod config;
-mod fsops;
-mod hooks;
+pub mod config;
+pub mod fsops;
+pub mod hooks;
 pub mod index;
 mod queue;
 mod sniff;
@@ -139,6 +140,10 @@ pub struct WatchArgs {
     /// 127.0.0.1) [default: off].
     #[arg(long, value_name = "ADDR")]
     pub metrics: Option<String>,
+    /// Forward the claimed files to this NATS work queue (nats://HOST:PORT) instead of
+    /// repairing them here, and publish the results that come back (docs/worker.md).
+    #[arg(long)]
+    pub forward: Option<String>,
 }
 
 /// Runs the daemon until SIGTERM or SIGINT (then returns `Ok` once every claimed file
@@ -289,7 +294,7 @@ impl Daemon {
                 layout.processing_root.display()
             )
         })?);
-        worker::probe_limits(settings.memory_limit_mb)?;
+        child::probe_limits(settings.memory_limit_mb)?;
         let (policy, policy_text) = snapshot_policy(&settings, &home.tmp, 0)?;
         if let Some(addr) = settings.metrics {
             let m = metrics::init("watch");
@@ -306,7 +311,22 @@ impl Daemon {
         if let Some(w) = hooks.warning() {
             tracing::warn!("{w}");
         }
+        let forward = match &settings.forward {
+            Some(url) => Some(
+                crate::worker::gateway::Forwarder::start(
+                    url,
+                    settings.nats.names()?,
+                    settings.nats.settings()?,
+                    &id.host,
+                    Duration::from_secs(30),
+                )
+                .await
+                .with_context(|| format!("--forward {url}"))?,
+            ),
+            None => None,
+        };
         let ctx = Arc::new(RunCtx {
+            forward,
             layout: layout.clone(),
             host: id.host.clone(),
             pid: id.pid,
@@ -1079,7 +1099,7 @@ impl Daemon {
             );
         }
         let new = self.settings.reloaded(&new);
-        if let Err(e) = worker::probe_limits(new.memory_limit_mb) {
+        if let Err(e) = child::probe_limits(new.memory_limit_mb) {
             tracing::error!("SIGHUP: the config is refused, the old one kept: {e:#}");
             return;
         }
@@ -1103,6 +1123,7 @@ impl Daemon {
             exe: self.ctx.exe.clone(),
             hooks: self.ctx.hooks.clone(),
             cores: self.ctx.cores,
+            forward: self.ctx.forward.clone(),
         });
         self.settings = new;
         tracing::info!(policy = ?self.settings.policy, "SIGHUP: config and policy reloaded");
