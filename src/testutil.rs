@@ -89,3 +89,22 @@ pub fn sphere_cap_removed(level: usize, r: f64, dir: DVec3, cap: f64) -> RawMesh
     });
     raw
 }
+
+/// A flat `n` x `n` grid of unit squares, two triangles each, facing +z: vertex
+/// `(i, j)` is `j * (n + 1) + i`, cell `(i, j)` is faces `2 (j n + i)` and `+ 1`.
+pub fn grid(n: usize) -> RawMesh {
+    let mut raw = RawMesh::default();
+    for j in 0..=n {
+        for i in 0..=n {
+            raw.positions.push(DVec3::new(i as f64, j as f64, 0.0));
+        }
+    }
+    let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
+    for j in 0..n {
+        for i in 0..n {
+            raw.faces.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+            raw.faces.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+        }
+    }
+    raw
+}
