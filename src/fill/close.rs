@@ -173,6 +173,10 @@ fn simple(p: &[DVec2]) -> bool {
     let meet = |a: DVec2, b: DVec2, c: DVec2, d: DVec2| {
         let (o1, o2) = (orient(a, b, c), orient(a, b, d));
         let (o3, o4) = (orient(c, d, a), orient(c, d, b));
+        if o1 == 0.0 && o2 == 0.0 {
+            // collinear: they meet only if their extents overlap
+            return a.min(b).cmple(c.max(d)).all() && c.min(d).cmple(a.max(b)).all();
+        }
         (o1 * o2 <= 0.0) && (o3 * o4 <= 0.0)
     };
     if k > 3000 {
@@ -258,7 +262,7 @@ mod tests {
 
     #[test]
     fn ear_clipping_triangulates_a_simple_polygon_and_refuses_a_crossing_one() {
-        // a comb: counter-clockwise, with three teeth
+        // a comb: counter-clockwise, with two notches
         let pts: Vec<DVec3> = [
             (0., 0.),
             (6., 0.),
@@ -285,8 +289,8 @@ mod tests {
                 (b - a).cross(c - a).z / 2.0
             })
             .sum();
-        // every triangle counter-clockwise, total = polygon area (18 - 2 - 4 = 12)
-        assert!((area - 12.0).abs() < 1e-9, "{area}");
+        // every triangle counter-clockwise, total = polygon area (18 - two 1 x 2 notches)
+        assert!((area - 14.0).abs() < 1e-9, "{area}");
         let bowtie: Vec<DVec3> = [(0., 0.), (1., 1.), (1., 0.), (0., 1.)]
             .iter()
             .map(|&(x, y)| DVec3::new(x, y, 0.0))

@@ -432,7 +432,6 @@ impl Mesh {
                 out_faces.push(f.map(VertexId));
             }
         }
-        drop(faces);
         let find =
             |faces: &Vec<[VertexId; 3]>, f: usize, a: VertexId, b: VertexId| -> Option<u32> {
                 (0..3)
@@ -448,8 +447,9 @@ impl Mesh {
             }
             let fa = (a / 3) as usize;
             let fb = (b / 3) as usize;
-            let u = out_faces[fa][(a % 3) as usize];
-            let w = out_faces[fa][((a % 3 + 1) % 3) as usize];
+            // the shared edge's ends, from the faces as read (a flip reorders corners)
+            let u = VertexId(from(&faces, a));
+            let w = VertexId(to(&faces, a));
             // after flipping, locate the half-edges of the shared edge in each face
             match (find(&out_faces, fa, u, w), find(&out_faces, fb, w, u)) {
                 (Some(x), Some(y)) => links.push((x, y)),
@@ -460,6 +460,7 @@ impl Mesh {
             }
         }
         drop(pairs);
+        drop(faces);
 
         // 4. split vertices with several fans. When some edge had more than two faces
         // or was left open by orientation, a face left out of a pair can still share
@@ -751,7 +752,8 @@ mod tests {
         );
         let (m, rep) = Mesh::from_raw(&raw);
         m.validate().unwrap();
-        assert_eq!(rep.duplicate_faces, 1);
+        assert_eq!(rep.duplicate_faces, 0);
+        assert_eq!(rep.opposite_faces, 1);
         assert_eq!(rep.repeated_index_faces, 1);
         assert_eq!(rep.zero_area_faces, 1);
         assert_eq!(rep.out_of_range_faces, 1);
