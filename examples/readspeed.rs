@@ -50,6 +50,7 @@ fn scan_like(faces: usize) -> RawMesh {
         precision: Precision::F32,
         encoding: Encoding::BinaryLittleEndian,
         notes: Vec::new(),
+        attrs: Default::default(),
     }
 }
 

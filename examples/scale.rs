@@ -114,6 +114,7 @@ pub fn torus_scan(faces: usize, holes: usize, seed: u64) -> RawMesh {
         precision: Precision::F32,
         encoding: Encoding::BinaryLittleEndian,
         notes: Vec::new(),
+        attrs: Default::default(),
     }
 }
 
@@ -163,6 +164,7 @@ pub fn capped_sphere(k: usize) -> RawMesh {
         precision: Precision::F64,
         encoding: Encoding::BinaryLittleEndian,
         notes: Vec::new(),
+        attrs: Default::default(),
     }
 }
 

@@ -177,5 +177,6 @@ pub fn mesh_from_bytes(data: &[u8]) -> Option<RawMesh> {
         precision: Precision::F64,
         encoding: Encoding::Ascii,
         notes: Vec::new(),
+        attrs: Default::default(),
     })
 }

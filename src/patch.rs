@@ -2,7 +2,7 @@
 //! vertices a method proposes for it ([`Patch`]), and applying an accepted patch to the
 //! mesh ([`apply_patch`]).
 
-use crate::mesh::{Mesh, VertexId};
+use crate::mesh::{Mesh, TopologyError, VertexId};
 use crate::policy::Policy;
 use crate::report::HoleClass;
 use glam::DVec3;
@@ -64,13 +64,24 @@ pub struct Patch {
     pub triangles: Vec<[u32; 3]>,
 }
 
+/// Why a patch could not be applied (the mesh is left as it was).
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum ApplyError {
+    /// A triangle names a patch vertex that is neither a loop vertex nor new.
+    #[error("patch references a vertex that does not exist")]
+    NoSuchVertex { index: u32 },
+    /// The mesh refused the faces (an edge would be used twice, ...).
+    #[error("patch would break the mesh: {0}")]
+    BreaksMesh(#[source] TopologyError),
+}
+
 /// Adds a checked patch to the mesh. Returns the range of new face indices.
 /// On failure the mesh is left as it was.
 pub fn apply_patch(
     mesh: &mut Mesh,
     hole: &Hole,
     patch: &Patch,
-) -> Result<std::ops::Range<usize>, String> {
+) -> Result<std::ops::Range<usize>, ApplyError> {
     let k = hole.len();
     let nv0 = mesh.num_vertices();
     let nf0 = mesh.num_faces();
@@ -84,29 +95,29 @@ pub fn apply_patch(
             .map(|bc| interpolate_color(mesh, hole, bc, p));
         mesh.add_vertex(p, col);
     }
-    let map = |i: u32| -> Result<VertexId, String> {
-        let i = i as usize;
-        if i < k {
-            Ok(hole.vertices[i])
-        } else if i - k < patch.new_vertices.len() {
-            Ok(VertexId::from_idx(nv0 + i - k))
+    let map = |i: u32| -> Result<VertexId, ApplyError> {
+        let j = i as usize;
+        if j < k {
+            Ok(hole.vertices[j])
+        } else if j - k < patch.new_vertices.len() {
+            Ok(VertexId::from_idx(nv0 + j - k))
         } else {
-            Err(format!("patch index {i} out of range"))
+            Err(ApplyError::NoSuchVertex { index: i })
         }
     };
     let mut faces = Vec::with_capacity(patch.triangles.len());
     for t in &patch.triangles {
         match (map(t[0]), map(t[1]), map(t[2])) {
             (Ok(a), Ok(b), Ok(c)) => faces.push([a, b, c]),
-            _ => {
+            (Err(e), _, _) | (_, Err(e), _) | (_, _, Err(e)) => {
                 mesh.truncate_vertices(nv0);
-                return Err("patch references a vertex that does not exist".into());
+                return Err(e);
             }
         }
     }
     if let Err(e) = mesh.add_faces(&faces) {
         mesh.truncate_vertices(nv0);
-        return Err(format!("patch would break the mesh: {e}"));
+        return Err(ApplyError::BreaksMesh(e));
     }
     Ok(nf0..mesh.num_faces())
 }

@@ -1,6 +1,7 @@
 //! The per-file repair log (serialised as JSON by `holefill fill --report` and by the
 //! daemon). The schema is documented in README.md ("Repair log").
 
+use crate::io::attrs::AttributesReport;
 use crate::io::Format;
 use crate::mesh::BuildReport;
 use crate::policy::{Method, Policy};
@@ -122,6 +123,8 @@ pub struct Timings {
     pub read_ms: f64,
     pub smooth_ms: f64,
     pub fill_ms: f64,
+    /// Carrying the input's attributes to the output (not part of the fill time).
+    pub attributes_ms: f64,
     pub write_ms: f64,
 }
 
@@ -155,6 +158,8 @@ pub struct RepairReport {
     pub timings: Timings,
     pub summary: Summary,
     pub holes: Vec<HoleReport>,
+    /// What the input carried besides positions and faces, and what became of it.
+    pub attributes: AttributesReport,
 }
 
 /// What smoothing did.
@@ -180,6 +185,7 @@ impl RepairReport {
             timings: Timings::default(),
             summary: Summary::default(),
             holes: Vec::new(),
+            attributes: AttributesReport::default(),
         }
     }
 

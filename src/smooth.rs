@@ -268,6 +268,7 @@ pub fn smooth(mesh: &mut Mesh, opts: &Smooth) -> SmoothingReport {
 mod tests {
     use super::*;
     use crate::io::RawMesh;
+    use crate::testutil::{cells_removed, grid};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
@@ -354,24 +355,9 @@ mod tests {
     /// A flat n x n grid (z = 0) with z noise on every vertex, and the cell (c, c)
     /// removed to make a hole.
     fn noisy_grid(n: usize, hole: Option<usize>) -> Mesh {
-        let mut raw = RawMesh::default();
         let mut rng = ChaCha8Rng::seed_from_u64(2);
-        for j in 0..=n {
-            for i in 0..=n {
-                raw.positions
-                    .push(DVec3::new(i as f64, j as f64, rng.random_range(-0.1..0.1)));
-            }
-        }
-        let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
-        for j in 0..n {
-            for i in 0..n {
-                if hole.is_some_and(|c| (i, j) == (c, c)) {
-                    continue;
-                }
-                raw.faces.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-                raw.faces.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-            }
-        }
+        let raw = grid(n, 0.0, n as f64, |_, _| rng.random_range(-0.1..0.1));
+        let mut raw = cells_removed(raw, |i, j| hole.is_some_and(|c| (i, j) == (c, c)));
         // an isolated vertex
         raw.positions.push(DVec3::new(100.0, 100.0, 100.0));
         Mesh::from_raw(&raw).0
@@ -413,23 +399,9 @@ mod tests {
 
     /// A flat 16 x 16 grid with the 8 x 2 cells (4..12, 7..9) removed.
     fn slot_grid() -> Mesh {
-        let n = 16;
-        let mut raw = RawMesh::default();
-        for j in 0..=n {
-            for i in 0..=n {
-                raw.positions.push(DVec3::new(i as f64, j as f64, 0.0));
-            }
-        }
-        let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
-        for j in 0..n {
-            for i in 0..n {
-                if (4..12).contains(&i) && (7..9).contains(&j) {
-                    continue;
-                }
-                raw.faces.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-                raw.faces.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-            }
-        }
+        let raw = cells_removed(grid(16, 0.0, 16.0, |_, _| 0.0), |i, j| {
+            (4..12).contains(&i) && (7..9).contains(&j)
+        });
         Mesh::from_raw(&raw).0
     }
 

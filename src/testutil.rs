@@ -1,8 +1,161 @@
-//! Fixtures shared by the unit tests (compiled only for tests).
+//! Fixtures shared by the unit tests (compiled only for tests): the meshes (grid,
+//! icosphere, cylinder) and their holes (faces cut away, the loop picked), and a fan
+//! patch.
 
 use crate::io::RawMesh;
+use crate::mesh::{Mesh, VertexId};
+use crate::patch::Patch;
 use glam::DVec3;
 use std::collections::HashMap;
+
+/// A grid of `n x n` square cells over `[lo, hi]²` with heights `z(x, y)`, faces up:
+/// vertex `(i, j)` is `j * (n + 1) + i`, each cell cut by its diagonal from `(i, j)` to
+/// `(i + 1, j + 1)` into two faces, cells in row order.
+pub fn grid(n: usize, lo: f64, hi: f64, mut z: impl FnMut(f64, f64) -> f64) -> RawMesh {
+    let mut raw = RawMesh::default();
+    for j in 0..=n {
+        for i in 0..=n {
+            let x = lo + (hi - lo) * i as f64 / n as f64;
+            let y = lo + (hi - lo) * j as f64 / n as f64;
+            raw.positions.push(DVec3::new(x, y, z(x, y)));
+        }
+    }
+    let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
+    for j in 0..n {
+        for i in 0..n {
+            raw.faces.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+            raw.faces.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+        }
+    }
+    raw
+}
+
+/// `raw` without the faces whose centroid satisfies `cut` (the vertices stay).
+pub fn cut_faces(mut raw: RawMesh, cut: impl Fn(DVec3) -> bool) -> RawMesh {
+    let pos = &raw.positions;
+    raw.faces.retain(|f| {
+        let c = f.iter().map(|&v| pos[v as usize]).sum::<DVec3>() / 3.0;
+        !cut(c)
+    });
+    raw
+}
+
+/// A grid of unit cells (a [`grid`] over `[0, n]²`) without the cells `(i, j)` for
+/// which `cut` holds.
+pub fn cells_removed(raw: RawMesh, cut: impl Fn(usize, usize) -> bool) -> RawMesh {
+    cut_faces(raw, |c| cut(c.x.floor() as usize, c.y.floor() as usize))
+}
+
+/// `a` and `b` as one soup, `b`'s vertices numbered after `a`'s.
+pub fn joined(mut a: RawMesh, b: &RawMesh) -> RawMesh {
+    let base = a.positions.len() as u32;
+    a.positions.extend_from_slice(&b.positions);
+    a.faces
+        .extend(b.faces.iter().map(|f| f.map(|v| v + base)));
+    a
+}
+
+/// An open cylinder of radius `radius` around the z axis: `rings` rings of `seg`
+/// vertices, ring `r` at height `z0 + r * dz`, faces outward. `staggered`: odd rings
+/// turned by half a step, the triangles of a cell alternating with the ring (near
+/// equilateral triangles for `dz = 2π/seg · 0.866`); else every quad cut by the same
+/// diagonal, as [`grid`] does.
+pub fn cylinder(radius: f64, seg: usize, rings: usize, dz: f64, z0: f64, staggered: bool) -> RawMesh {
+    use std::f64::consts::TAU;
+    let mut raw = RawMesh::default();
+    for r in 0..rings {
+        for s in 0..seg {
+            let shift = if staggered { 0.5 * (r % 2) as f64 } else { 0.0 };
+            let a = (s as f64 + shift) * TAU / seg as f64;
+            raw.positions.push(DVec3::new(
+                radius * a.cos(),
+                radius * a.sin(),
+                z0 + r as f64 * dz,
+            ));
+        }
+    }
+    let id = |r: usize, s: usize| (r * seg + s % seg) as u32;
+    for r in 0..rings - 1 {
+        for s in 0..seg {
+            let fs = if !staggered {
+                [
+                    [id(r, s), id(r, s + 1), id(r + 1, s + 1)],
+                    [id(r, s), id(r + 1, s + 1), id(r + 1, s)],
+                ]
+            } else if r % 2 == 0 {
+                [
+                    [id(r, s), id(r, s + 1), id(r + 1, s)],
+                    [id(r, s + 1), id(r + 1, s + 1), id(r + 1, s)],
+                ]
+            } else {
+                [
+                    [id(r, s), id(r + 1, s + 1), id(r + 1, s)],
+                    [id(r, s), id(r, s + 1), id(r + 1, s + 1)],
+                ]
+            };
+            raw.faces.extend(fs);
+        }
+    }
+    raw
+}
+
+/// The staggered unit [`cylinder`] with a hole on its side: the faces whose centroid has
+/// `|angle| < half_angle` and `|z - zc| < half_height` (`zc` the middle height)
+/// removed. Returns the mesh and the hole's loop.
+pub fn cylinder_with_hole(
+    seg: usize,
+    rings: usize,
+    half_angle: f64,
+    half_height: f64,
+) -> (Mesh, Vec<VertexId>) {
+    let dz = 2.0 * std::f64::consts::PI / seg as f64 * 0.866;
+    let zc = (rings - 1) as f64 * dz * 0.5;
+    let raw = cut_faces(cylinder(1.0, seg, rings, dz, 0.0, true), |c| {
+        c.y.atan2(c.x).abs() < half_angle && (c.z - zc).abs() < half_height
+    });
+    mesh_and_loop(&raw, |_, l| l.len() != seg)
+}
+
+/// The mesh of `raw` (validated) and the first of its boundary loops for which `pick`
+/// holds.
+pub fn mesh_and_loop(
+    raw: &RawMesh,
+    pick: impl Fn(&Mesh, &[VertexId]) -> bool,
+) -> (Mesh, Vec<VertexId>) {
+    let (mesh, _) = Mesh::from_raw(raw);
+    mesh.validate().unwrap();
+    let lp = mesh
+        .topo
+        .boundary_loops()
+        .into_iter()
+        .find(|l| pick(&mesh, l))
+        .expect("a boundary loop that fits");
+    (mesh, lp)
+}
+
+/// The boundary loop of `mesh` whose farthest vertex from `p` is nearest.
+pub fn loop_near(mesh: &Mesh, p: DVec3) -> Vec<VertexId> {
+    let mut loops = mesh.topo.boundary_loops();
+    loops.sort_by(|a, b| {
+        let c = |l: &Vec<VertexId>| {
+            l.iter()
+                .map(|&v| (mesh.pos(v) - p).length())
+                .fold(0.0, f64::max)
+        };
+        c(a).total_cmp(&c(b))
+    });
+    loops.swap_remove(0)
+}
+
+/// A fan over a loop of `k` vertices: one new vertex, `apex`, joined to every edge.
+pub fn fan(k: usize, apex: DVec3) -> Patch {
+    Patch {
+        new_vertices: vec![apex],
+        triangles: (0..k)
+            .map(|i| [i as u32, ((i + 1) % k) as u32, k as u32])
+            .collect(),
+    }
+}
 
 /// Icosphere of radius `r` with `level` subdivisions.
 pub fn icosphere(level: usize, r: f64) -> RawMesh {

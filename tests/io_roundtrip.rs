@@ -92,10 +92,12 @@ fn ply_extra_properties_elements_and_colours() {
     assert_eq!(c[0], [1.0, 0.0, 0.0]);
     assert_eq!(c[3], [51.0 / 255.0, 102.0 / 255.0, 153.0 / 255.0]);
     assert_eq!(m.precision, Precision::F32);
+    // other elements are kept, to be written back (issue 18)
+    let ply = m.attrs.ply.as_ref().unwrap();
     assert!(
-        m.notes.iter().any(|n| n.contains("'edge'")),
+        ply.elements.iter().any(|(name, _, _)| name == "edge"),
         "{:?}",
-        m.notes
+        ply.elements
     );
 }
 

@@ -350,6 +350,12 @@ impl Checker {
         self.check_intersections(mesh, hole, patch, &pos, false, None)
     }
 
+    /// Faces committed since construction (in the trees or the tail).
+    #[cfg(test)]
+    pub(crate) fn committed_faces(&self) -> usize {
+        self.levels.iter().map(|l| l.faces.len()).sum::<usize>() + self.tail.len()
+    }
+
     /// Records that the faces in `faces` (indices into the mesh) were added. Faces
     /// appended to the mesh earlier without a commit are indexed too, so every face
     /// of the mesh is always checked against.

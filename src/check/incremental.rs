@@ -1,8 +1,8 @@
 //! The checks of [`Checker::check_patch_near`] for a sequence of patches over the same
 //! vertices that differ by a few triangles at a time (the edge flips of
-//! `fill::wavefront::retry`): every failing pair is recorded once, and a change
-//! re-tests only its new triangles. A flip trial then costs a few thousand
-//! instructions instead of a whole check (2 to 3 million on the bunny scan's holes).
+//! `fill::kit::retry`): every failing pair is recorded once, and a change
+//! re-tests only its new triangles, so a flip trial costs a few thousand
+//! instructions instead of a whole check.
 //!
 //! The failure reported is the one [`Checker::check_patch_near`] reports for the same
 //! patch (tests compare the two on every trial): topology first (checked whole, it is

@@ -96,6 +96,9 @@ pub struct RawMesh {
     pub encoding: Encoding,
     /// What the reader resolved on the way (polygons fanned, vertices welded, ...).
     pub notes: Vec<String>,
+    /// Everything else the file carried (properties, corner UVs and normals,
+    /// materials, groups, headers): see [`attrs`].
+    pub attrs: attrs::Attrs,
 }
 
 /// An I/O or format error, always naming the file.
@@ -129,6 +132,7 @@ impl IoError {
 }
 
 mod atomic;
+pub mod attrs;
 mod obj;
 mod off;
 mod ply;
@@ -290,6 +294,7 @@ fn read_source<R: std::io::BufRead>(
         Format::Off => off::read(path, reader, len, &caps)?,
     };
     check_read(path, &raw)?;
+    attrs::check(&raw).map_err(|m| malformed(path, None, m))?;
     Ok(raw)
 }
 
@@ -429,7 +434,7 @@ fn check_writable(path: &Path, raw: &RawMesh, as_f32: bool) -> Result<(), IoErro
             "face {k} {f:?} has a vertex index out of range ({n} vertices)"
         )));
     }
-    Ok(())
+    attrs::check(raw).map_err(bad)
 }
 
 /// Writes a coordinate as text: Rust's shortest representation that parses back to

@@ -17,6 +17,7 @@
 //! notes and errors (with their line) are always the line reader's; a test compares
 //! the two on generated files.
 
+use super::attrs::{Corners, ObjExtras, ObjState};
 use super::text::{has_nul, parse_coord, parse_f64, parse_i64, show, strip_comment, tokens};
 use super::text::{Lines, Next, MAX_LINE, UTF8_BOM};
 use super::{io_error, malformed, unit_color, Caps, IoError, Precision, RawMesh, MAX_ELEMENTS};
@@ -43,6 +44,68 @@ struct State {
     /// Largest positive index seen that referred past the vertices read so far
     /// (forward references are resolved at the end), with its line.
     forward: Option<(u64, usize)>,
+    /// What the line reader gathers besides positions and faces.
+    extra: Extra,
+}
+
+/// Texture coordinates, normals, per-corner indices and face states (only the line
+/// reader reads them: the parallel parser hands a file over at the first such
+/// record).
+#[derive(Default)]
+struct Extra {
+    uv: Vec<[f64; 2]>,
+    normals: Vec<[f64; 3]>,
+    uv_index: Vec<Option<[u32; 3]>>,
+    normal_index: Vec<Option<[u32; 3]>>,
+    /// Largest `vt` / `vn` index used (0-based) and its line.
+    max_uv: Option<(u64, usize)>,
+    max_normal: Option<(u64, usize)>,
+    mtllibs: Vec<String>,
+    states: Vec<ObjState>,
+    state_ids: crate::fasthash::HashMap<ObjState, u32>,
+    current: ObjState,
+    /// Per face, its state (from the first `usemtl`/`g`/`o`/`s` on).
+    face_state: Vec<u32>,
+    states_used: bool,
+    /// Faces whose corners do not all have a texture coordinate (or a normal).
+    partial: u64,
+    uvw: u64,
+}
+
+impl Extra {
+    /// Pads the per-face vectors to `nf` faces (those the parallel parser read,
+    /// which have no corners and the default state).
+    fn pad(&mut self, nf: usize) {
+        if self.uv_index.len() < nf {
+            self.uv_index.resize(nf, None);
+        }
+        if self.normal_index.len() < nf {
+            self.normal_index.resize(nf, None);
+        }
+        if self.states_used && self.face_state.len() < nf {
+            self.face_state.resize(nf, 0);
+        }
+    }
+    /// The id of the current state.
+    fn state(&mut self) -> u32 {
+        if let Some(&id) = self.state_ids.get(&self.current) {
+            return id;
+        }
+        let id = self.states.len() as u32;
+        self.states.push(self.current.clone());
+        self.state_ids.insert(self.current.clone(), id);
+        id
+    }
+    /// Starts tracking states (the faces so far get the default state, id 0).
+    fn use_states(&mut self, nf: usize) {
+        if !self.states_used {
+            self.states_used = true;
+            let default = ObjState::default();
+            self.states.push(default.clone());
+            self.state_ids.insert(default, 0);
+            self.face_state.resize(nf, 0);
+        }
+    }
 }
 
 impl State {
@@ -58,6 +121,7 @@ impl State {
             w_scaled: 0,
             skipped_lp: 0,
             forward: None,
+            extra: Extra::default(),
         }
     }
 }
@@ -320,6 +384,8 @@ impl Piece {
         let i = match b.get(start..end)? {
             b"v" => self.vertex(b, end)?,
             b"f" | b"fo" => self.face(b, end)?,
+            // attributes: the line reader reads them (and the rest of the file)
+            b"vt" | b"vn" | b"usemtl" | b"mtllib" | b"g" | b"o" | b"s" => return None,
             kw => {
                 if kw == b"l" || kw == b"p" {
                     self.skipped_lp += 1;
@@ -450,7 +516,8 @@ fn index(b: &[u8], i: &mut usize) -> Option<i64> {
         return None;
     }
     match b.get(*i) {
-        Some(b'/') => *i = token_end(b, *i),
+        // corner indices: the line reader reads them
+        Some(b'/') => return None,
         c if ends_token(c) => {}
         _ => return None,
     }
@@ -573,7 +640,10 @@ fn read_lines<R: BufRead>(
         w_scaled,
         skipped_lp,
         forward,
+        extra,
     } = st;
+    // a face's corners: vertex, texture coordinate, normal (0-based)
+    let mut corners: Vec<(u32, Option<u32>, Option<u32>)> = Vec::new();
     loop {
         let (ln, line) = match lines.next_line(MAX_LINE).map_err(|e| io_error(path, e))? {
             Next::Line(ln, l) => (ln, l),
@@ -640,11 +710,10 @@ fn read_lines<R: BufRead>(
             }
             Some(b"f") | Some(b"fo") => {
                 let nv = raw.positions.len() as i64;
-                let mut first = 0u32;
-                let mut prev = 0u32;
-                let mut count = 0usize;
+                corners.clear();
                 for t in toks {
-                    let vtok = t.split(|&b| b == b'/').next().unwrap_or(t);
+                    let mut parts = t.split(|&b| b == b'/');
+                    let vtok = parts.next().unwrap_or(t);
                     let k = parse_i64(vtok)
                         .ok_or_else(|| bad(format!("'{}' is not a vertex index", show(t))))?;
                     let i = match k {
@@ -666,20 +735,31 @@ fn read_lines<R: BufRead>(
                     if i >= nv && forward.is_none_or(|(m, _)| (i as u64) > m) {
                         *forward = Some((i as u64, ln));
                     }
-                    let i = i as u32;
-                    count += 1;
-                    match count {
-                        1 => first = i,
-                        2 => prev = i,
-                        _ => {
-                            if raw.faces.len() as u64 >= caps.faces() {
-                                return Err(bad(caps.face_msg(None)));
-                            }
-                            raw.faces.push([first, prev, i]);
-                            prev = i;
-                        }
-                    }
+                    let tt = parts.next().filter(|p| !p.is_empty());
+                    let nt = parts.next().filter(|p| !p.is_empty());
+                    let ti = match tt {
+                        Some(p) => Some(
+                            attr_index(
+                                p,
+                                extra.uv.len(),
+                                "texture coordinate",
+                                ln,
+                                &mut extra.max_uv,
+                            )
+                            .map_err(&bad)?,
+                        ),
+                        None => None,
+                    };
+                    let ni = match nt {
+                        Some(p) => Some(
+                            attr_index(p, extra.normals.len(), "normal", ln, &mut extra.max_normal)
+                                .map_err(&bad)?,
+                        ),
+                        None => None,
+                    };
+                    corners.push((i as u32, ti, ni));
                 }
+                let count = corners.len();
                 if count < 3 {
                     return Err(bad(format!(
                         "a face needs at least 3 vertices, found {count}"
@@ -687,6 +767,94 @@ fn read_lines<R: BufRead>(
                 }
                 if count > 3 {
                     *polygons += 1;
+                }
+                if raw.faces.len() as u64 + (count as u64 - 2) > caps.faces() {
+                    return Err(bad(caps.face_msg(None)));
+                }
+                let all_t = corners.iter().all(|c| c.1.is_some());
+                let all_n = corners.iter().all(|c| c.2.is_some());
+                let any = corners.iter().any(|c| c.1.is_some() || c.2.is_some());
+                if any && !(all_t || corners.iter().all(|c| c.1.is_none()))
+                    || any && !(all_n || corners.iter().all(|c| c.2.is_none()))
+                {
+                    extra.partial += 1;
+                }
+                let state = if extra.states_used {
+                    Some(extra.state())
+                } else {
+                    None
+                };
+                extra.pad(raw.faces.len());
+                for j in 2..count {
+                    let (Some(a), Some(b), Some(c)) =
+                        (corners.first(), corners.get(j - 1), corners.get(j))
+                    else {
+                        continue;
+                    };
+                    raw.faces.push([a.0, b.0, c.0]);
+                    extra.uv_index.push(match (all_t, a.1, b.1, c.1) {
+                        (true, Some(x), Some(y), Some(z)) => Some([x, y, z]),
+                        _ => None,
+                    });
+                    extra.normal_index.push(match (all_n, a.2, b.2, c.2) {
+                        (true, Some(x), Some(y), Some(z)) => Some([x, y, z]),
+                        _ => None,
+                    });
+                    if let Some(s) = state {
+                        extra.face_state.push(s);
+                    }
+                }
+            }
+            Some(b"vt") => {
+                let mut vals = [0.0f64; 2];
+                let mut n = 0;
+                for t in toks {
+                    let v = parse_f64(t)
+                        .ok_or_else(|| bad(format!("'{}' is not a number", show(t))))?;
+                    if let Some(slot) = vals.get_mut(n) {
+                        *slot = v;
+                    }
+                    n += 1;
+                }
+                if n == 0 || n > 3 {
+                    return Err(bad(format!("a 'vt' line needs 1 to 3 numbers, found {n}")));
+                }
+                if n == 3 {
+                    extra.uvw += 1;
+                }
+                extra.uv.push(vals);
+            }
+            Some(b"vn") => {
+                let mut vals = [0.0f64; 3];
+                let mut n = 0;
+                for t in toks {
+                    let v = parse_f64(t)
+                        .ok_or_else(|| bad(format!("'{}' is not a number", show(t))))?;
+                    if let Some(slot) = vals.get_mut(n) {
+                        *slot = v;
+                    }
+                    n += 1;
+                }
+                if n != 3 {
+                    return Err(bad(format!("a 'vn' line needs 3 numbers, found {n}")));
+                }
+                extra.normals.push(vals);
+            }
+            Some(b"mtllib") => {
+                let rest = rest_of(strip_comment(line), b"mtllib");
+                if !rest.is_empty() {
+                    extra.mtllibs.push(rest);
+                }
+            }
+            Some(kw @ (b"usemtl" | b"g" | b"o" | b"s")) => {
+                extra.use_states(raw.faces.len());
+                let rest = rest_of(strip_comment(line), kw);
+                let v = (!rest.is_empty()).then_some(rest);
+                match kw {
+                    b"usemtl" => extra.current.material = v,
+                    b"g" => extra.current.group = v,
+                    b"o" => extra.current.object = v,
+                    _ => extra.current.smoothing = v,
                 }
             }
             Some(b"l") | Some(b"p") => *skipped_lp += 1,
@@ -706,8 +874,56 @@ fn finish(path: &Path, st: State) -> Result<RawMesh, IoError> {
         w_scaled,
         skipped_lp,
         forward,
+        mut extra,
     } = st;
     let n = raw.positions.len() as u64;
+    for (max, count, what) in [
+        (extra.max_uv, extra.uv.len(), "texture coordinate"),
+        (extra.max_normal, extra.normals.len(), "normal"),
+    ] {
+        if let Some((i, ln)) = max {
+            if i >= count as u64 {
+                return Err(malformed(
+                    path,
+                    Some(ln),
+                    format!("{what} index {} out of range (the file has {count})", i + 1),
+                ));
+            }
+        }
+    }
+    let nf = raw.faces.len();
+    extra.pad(nf);
+    if extra.uv_index.iter().any(Option::is_some) || !extra.uv.is_empty() {
+        raw.attrs.uv = Some(Corners {
+            values: std::mem::take(&mut extra.uv),
+            index: std::mem::take(&mut extra.uv_index),
+        });
+    }
+    if extra.normal_index.iter().any(Option::is_some) || !extra.normals.is_empty() {
+        raw.attrs.normals = Some(Corners {
+            values: std::mem::take(&mut extra.normals),
+            index: std::mem::take(&mut extra.normal_index),
+        });
+    }
+    if extra.states_used || !extra.mtllibs.is_empty() {
+        raw.attrs.obj = Some(ObjExtras {
+            mtllibs: std::mem::take(&mut extra.mtllibs),
+            states: std::mem::take(&mut extra.states),
+            face_state: std::mem::take(&mut extra.face_state),
+        });
+    }
+    if extra.partial > 0 {
+        raw.notes.push(format!(
+            "{} OBJ faces have texture coordinates or normals on some corners only: those faces keep none of that kind",
+            extra.partial
+        ));
+    }
+    if extra.uvw > 0 {
+        raw.notes.push(format!(
+            "dropped the third (w) texture coordinate of {} OBJ 'vt' records",
+            extra.uvw
+        ));
+    }
     if let Some((i, ln)) = forward {
         if i >= n {
             return Err(malformed(
@@ -758,7 +974,46 @@ fn finish(path: &Path, st: State) -> Result<RawMesh, IoError> {
     Ok(raw)
 }
 
-/// Writes an OBJ file: `v x y z [r g b]` and `f a b c` (1-based).
+/// A `vt`/`vn` index of a face corner (1-based, or negative: relative to the
+/// `count` read so far), 0-based; the largest one is kept with its line for the
+/// range check at the end.
+fn attr_index(
+    tok: &[u8],
+    count: usize,
+    what: &str,
+    ln: usize,
+    max: &mut Option<(u64, usize)>,
+) -> Result<u32, String> {
+    let k = parse_i64(tok).ok_or_else(|| format!("'{}' is not a {what} index", show(tok)))?;
+    let i = match k {
+        0 => return Err(format!("{what} index 0 (OBJ indices start at 1)")),
+        k if k > 0 => k - 1,
+        k => {
+            let i = count as i64 + k;
+            if i < 0 {
+                return Err(format!(
+                    "relative {what} index {k} refers before the first one"
+                ));
+            }
+            i
+        }
+    };
+    let i = u32::try_from(i).map_err(|_| format!("{what} index {k} out of range"))?;
+    if max.is_none_or(|(m, _)| u64::from(i) > m) {
+        *max = Some((u64::from(i), ln));
+    }
+    Ok(i)
+}
+
+/// The text of a line after its keyword, trimmed (`usemtl`, `g`, `mtllib`, ...).
+fn rest_of(line: &[u8], kw: &[u8]) -> String {
+    let t = line.trim_ascii_start();
+    let t = t.strip_prefix(kw).unwrap_or(t);
+    String::from_utf8_lossy(t.trim_ascii()).into_owned()
+}
+
+/// Writes an OBJ file: `mtllib`, `v x y z [r g b]`, `vt`, `vn`, the face states
+/// (`o`, `g`, `usemtl`, `s` where they change) and `f a[/t][/n] ...` (1-based).
 pub(crate) fn write<W: Write>(w: &mut W, raw: &RawMesh) -> std::io::Result<()> {
     let f32 = raw.precision == Precision::F32;
     writeln!(
@@ -767,6 +1022,12 @@ pub(crate) fn write<W: Write>(w: &mut W, raw: &RawMesh) -> std::io::Result<()> {
         raw.positions.len(),
         raw.faces.len()
     )?;
+    let a = &raw.attrs;
+    if let Some(o) = &a.obj {
+        for m in &o.mtllibs {
+            writeln!(w, "mtllib {}", one_line(m))?;
+        }
+    }
     let colors = raw.colors.as_deref();
     for (i, p) in raw.positions.iter().enumerate() {
         w.write_all(b"v ")?;
@@ -780,16 +1041,76 @@ pub(crate) fn write<W: Write>(w: &mut W, raw: &RawMesh) -> std::io::Result<()> {
         }
         w.write_all(b"\n")?;
     }
-    for f in &raw.faces {
-        writeln!(
-            w,
-            "f {} {} {}",
-            u64::from(f[0]) + 1,
-            u64::from(f[1]) + 1,
-            u64::from(f[2]) + 1
-        )?;
+    if let Some(uv) = &a.uv {
+        for t in &uv.values {
+            w.write_all(b"vt ")?;
+            super::write_real(w, t[0], false)?;
+            w.write_all(b" ")?;
+            super::write_real(w, t[1], false)?;
+            w.write_all(b"\n")?;
+        }
+    }
+    if let Some(n) = &a.normals {
+        for t in &n.values {
+            w.write_all(b"vn ")?;
+            super::write_real(w, t[0], false)?;
+            w.write_all(b" ")?;
+            super::write_real(w, t[1], false)?;
+            w.write_all(b" ")?;
+            super::write_real(w, t[2], false)?;
+            w.write_all(b"\n")?;
+        }
+    }
+    let states = a.obj.as_ref().filter(|o| !o.face_state.is_empty());
+    let default = ObjState::default();
+    let mut last = &default;
+    let uv = a.uv.as_ref();
+    let nrm = a.normals.as_ref();
+    for (k, f) in raw.faces.iter().enumerate() {
+        if let Some(o) = states {
+            let s = o
+                .face_state
+                .get(k)
+                .and_then(|&s| o.states.get(s as usize))
+                .unwrap_or(&default);
+            if s.object != last.object {
+                writeln!(w, "o {}", one_line(s.object.as_deref().unwrap_or("")))?;
+            }
+            if s.group != last.group {
+                writeln!(w, "g {}", one_line(s.group.as_deref().unwrap_or("")))?;
+            }
+            if s.material != last.material {
+                if let Some(m) = &s.material {
+                    writeln!(w, "usemtl {}", one_line(m))?;
+                }
+            }
+            if s.smoothing != last.smoothing {
+                writeln!(w, "s {}", one_line(s.smoothing.as_deref().unwrap_or("off")))?;
+            }
+            last = s;
+        }
+        let t = uv.and_then(|c| c.index.get(k).copied().flatten());
+        let n = nrm.and_then(|c| c.index.get(k).copied().flatten());
+        w.write_all(b"f")?;
+        for c in 0..3 {
+            write!(w, " {}", u64::from(f[c]) + 1)?;
+            match (t, n) {
+                (Some(t), Some(n)) => {
+                    write!(w, "/{}/{}", u64::from(t[c]) + 1, u64::from(n[c]) + 1)?
+                }
+                (Some(t), None) => write!(w, "/{}", u64::from(t[c]) + 1)?,
+                (None, Some(n)) => write!(w, "//{}", u64::from(n[c]) + 1)?,
+                (None, None) => {}
+            }
+        }
+        w.write_all(b"\n")?;
     }
     Ok(())
+}
+
+/// A name on one line (a line break inside would start a record of its own).
+fn one_line(s: &str) -> String {
+    s.replace(['\n', '\r'], " ")
 }
 
 #[cfg(test)]
@@ -896,6 +1217,9 @@ mod tests {
                 if a.faces != b.faces {
                     return Err("faces differ".into());
                 }
+                if a.attrs != b.attrs {
+                    return Err("attributes differ".into());
+                }
                 if a.notes != b.notes || a.precision != b.precision || a.encoding != b.encoding {
                     return Err(format!("notes differ: {:?} vs {:?}", a.notes, b.notes));
                 }
@@ -933,7 +1257,7 @@ mod tests {
     /// or mixed line ends, comments (whole lines and after data), blank lines,
     /// ignored records, `w` and colour vertices, polygons, `v/vt/vn` corners,
     /// relative and forward indices, odd whitespace; with `bad`, one malformed line.
-    fn random_obj(rng: &mut ChaCha8Rng, bad: bool) -> Vec<u8> {
+    fn random_obj(rng: &mut ChaCha8Rng, bad: bool, attrs: bool) -> Vec<u8> {
         let mut out = Vec::new();
         if rng.random_bool(0.2) {
             out.extend_from_slice(UTF8_BOM);
@@ -996,7 +1320,7 @@ mod tests {
                             _ => i + 1,
                         };
                         line.push_str(&idx.to_string());
-                        match rng.random_range(0..6) {
+                        match if attrs { rng.random_range(0..6) } else { 6 } {
                             0 => line.push_str("/1"),
                             1 => line.push_str("//2"),
                             2 => line.push_str("/3/4"),
@@ -1006,7 +1330,7 @@ mod tests {
                 }
                 14 => line.push_str("# a comment"),
                 15 => {}
-                16 => line.push_str(
+                16 if attrs => line.push_str(
                     ["vt 0 1", "vn 0 0 1", "o part", "g grp", "s off", "usemtl m"]
                         [rng.random_range(0..6)],
                 ),
@@ -1064,7 +1388,10 @@ mod tests {
         let mut errors = 0;
         for case in 0..1500 {
             let bad = case % 3 == 0;
-            let src = random_obj(&mut rng, bad);
+            // files with texture coordinates, normals, corners and states: read by
+            // the line reader from the first such record on
+            let attrs = case % 2 == 0;
+            let src = random_obj(&mut rng, bad, attrs);
             let caps = match case % 10 {
                 0 => Caps::new(&ReadLimits {
                     max_vertices: rng.random_range(1..40),
@@ -1095,13 +1422,13 @@ mod tests {
             }
             // The fast parser takes every valid file (the comparison above is not
             // only the line reader against itself).
-            if !bad && case % 10 > 1 {
+            if !bad && case % 10 > 1 && !attrs {
                 let mut p = Piece::default();
                 assert!(p.parse(&src, true), "{}", String::from_utf8_lossy(&src));
                 fast_ok += 1;
             }
         }
-        assert!(fast_ok > 500 && errors > 300, "{fast_ok} {errors}");
+        assert!(fast_ok > 250 && errors > 300, "{fast_ok} {errors}");
     }
 
     #[test]
@@ -1200,10 +1527,15 @@ mod tests {
             "00012",
             "1/x/y",
         ] {
-            let vtok = t.split('/').next().unwrap_or(t);
             let mut i = 0;
             let got = index(t.as_bytes(), &mut i);
-            assert_eq!(got, parse_i64(vtok.as_bytes()), "{t:?}");
+            // corner indices (`v/t/n`) are left to the line reader
+            let want = if t.contains('/') {
+                None
+            } else {
+                parse_i64(t.as_bytes())
+            };
+            assert_eq!(got, want, "{t:?}");
             if got.is_some() {
                 assert_eq!(i, t.len(), "{t:?}");
             }

@@ -162,6 +162,13 @@ pub(crate) fn read<R: BufRead>(
         colors.reserve(nv as usize);
     }
     let mut missing_color = 0u64;
+    // normals, colours (with their kind: integers or reals, 3 or 4) and texture
+    // coordinates kept as vertex properties, values as written
+    let mut nrm: [Vec<f64>; 3] = Default::default();
+    let mut col: [Vec<f64>; 4] = Default::default();
+    let mut col_kind: Option<(bool, usize)> = None;
+    let mut col_mixed = false;
+    let mut stv: [Vec<f64>; 2] = Default::default();
     for i in 0..nv {
         let Some((ln, l)) = content_line(path, &mut lines)? else {
             return Err(malformed(
@@ -181,9 +188,26 @@ pub(crate) fn read<R: BufRead>(
         }
         raw.positions.push(DVec3::from_array(p));
         if normals {
-            for _ in 0..3 {
-                t.next()
+            for n in nrm.iter_mut() {
+                let tok = t
+                    .next()
                     .ok_or_else(|| bad("missing vertex normal".into()))?;
+                n.push(
+                    parse_f64(tok)
+                        .ok_or_else(|| bad(format!("bad normal value '{}'", show(tok))))?,
+                );
+            }
+        }
+        if st && !color {
+            // x y z [n] s t
+            for v in stv.iter_mut() {
+                let tok = t
+                    .next()
+                    .ok_or_else(|| bad("missing texture coordinate".into()))?;
+                v.push(
+                    parse_f64(tok)
+                        .ok_or_else(|| bad(format!("bad texture coordinate '{}'", show(tok))))?,
+                );
             }
         }
         if color {
@@ -198,12 +222,29 @@ pub(crate) fn read<R: BufRead>(
             }
             let n = k.saturating_sub(if st { 2 } else { 0 });
             let comps = rest.get(..n.min(4)).unwrap_or(&[]);
+            if st {
+                for (v, tok) in stv.iter_mut().zip(rest.get(n..k).unwrap_or(&[])) {
+                    v.push(
+                        parse_f64(tok).ok_or_else(|| {
+                            bad(format!("bad texture coordinate '{}'", show(tok)))
+                        })?,
+                    );
+                }
+            }
             if comps.len() < 3 {
                 missing_color += 1;
                 colors.push([1.0; 3]);
                 continue;
             }
             let ints = comps.iter().all(|c| parse_i64(c).is_some());
+            match col_kind {
+                None => col_kind = Some((ints, comps.len())),
+                Some(kind) if kind != (ints, comps.len()) => col_mixed = true,
+                Some(_) => {}
+            }
+            for (slot, tok) in col.iter_mut().zip(comps) {
+                slot.push(parse_f64(tok).unwrap_or(0.0));
+            }
             let mut c = [0.0f32; 3];
             for (slot, tok) in c.iter_mut().zip(comps) {
                 let v = parse_f64(tok)
@@ -259,6 +300,44 @@ pub(crate) fn read<R: BufRead>(
             }
         }
     }
+    use super::attrs::{PropData, Property, ScalarType, Values};
+    let prop = |name: &str, vals: Vec<f64>, ty: ScalarType| {
+        let mut v = Values::new(ty, vals.len());
+        for x in vals {
+            v.push_f64(x);
+        }
+        Property {
+            name: name.into(),
+            data: PropData::Scalar(v),
+        }
+    };
+    if normals {
+        for (name, v) in ["nx", "ny", "nz"].into_iter().zip(nrm) {
+            raw.attrs.vertex.push(prop(name, v, ScalarType::F64));
+        }
+    }
+    if let (Some((ints, n)), false, 0) = (col_kind, col_mixed, missing_color) {
+        let ty = if ints {
+            ScalarType::U8
+        } else {
+            ScalarType::F64
+        };
+        let in_range = !ints || col.iter().flatten().all(|&c| (0.0..=255.0).contains(&c));
+        if in_range {
+            for (name, v) in ["red", "green", "blue", "alpha"]
+                .into_iter()
+                .zip(col)
+                .take(n)
+            {
+                raw.attrs.vertex.push(prop(name, v, ty));
+            }
+        }
+    }
+    if st && stv[0].len() as u64 == nv && stv[1].len() as u64 == nv {
+        for (name, v) in ["s", "t"].into_iter().zip(stv) {
+            raw.attrs.vertex.push(prop(name, v, ScalarType::F64));
+        }
+    }
     if color {
         if missing_color == 0 {
             raw.colors = Some(colors);
@@ -276,23 +355,70 @@ pub(crate) fn read<R: BufRead>(
     Ok(raw)
 }
 
-/// Writes `OFF` (or `COFF` with 0..255 colours and alpha 255 when there are colours).
+/// Writes `[ST][C][N]OFF`: vertex normals when the mesh has `nx ny nz`, colours
+/// from the colour properties as they were read (integers or reals, with alpha when
+/// read with it) or else 0..255 with alpha 255, texture coordinates when it has
+/// `s t`.
 pub(crate) fn write<W: Write>(w: &mut W, raw: &RawMesh) -> std::io::Result<()> {
+    use super::attrs::{PropData, Property, Values};
     let f32 = raw.precision == Precision::F32;
-    let colors = raw.colors.as_deref();
+    fn property<'a>(raw: &'a RawMesh, name: &str) -> Option<&'a Values> {
+        raw.attrs
+            .vertex
+            .iter()
+            .find_map(|p: &Property| match &p.data {
+                PropData::Scalar(v) if p.name == name => Some(v),
+                _ => None,
+            })
+    }
+    let find = |name: &str| property(raw, name);
+    let normals = match (find("nx"), find("ny"), find("nz")) {
+        (Some(a), Some(b), Some(c)) => Some([a, b, c]),
+        _ => None,
+    };
+    let color_props: Vec<&Values> = match (find("red"), find("green"), find("blue")) {
+        (Some(r), Some(g), Some(b)) => [Some(r), Some(g), Some(b), find("alpha")]
+            .into_iter()
+            .flatten()
+            .collect(),
+        _ => Vec::new(),
+    };
+    let colors = raw.colors.as_deref().filter(|_| color_props.is_empty());
+    let st = match (find("s"), find("t")) {
+        (Some(a), Some(b)) => Some([a, b]),
+        _ => None,
+    };
+    let has_color = colors.is_some() || !color_props.is_empty();
     writeln!(
         w,
-        "{}\n{} {} 0",
-        if colors.is_some() { "COFF" } else { "OFF" },
+        "{}{}{}OFF\n{} {} 0",
+        if st.is_some() { "ST" } else { "" },
+        if has_color { "C" } else { "" },
+        if normals.is_some() { "N" } else { "" },
         raw.positions.len(),
         raw.faces.len()
     )?;
+    let val = |w: &mut W, v: &Values, i: usize| -> std::io::Result<()> {
+        let x = v.get(i).unwrap_or(0.0);
+        w.write_all(b" ")?;
+        if v.ty().is_int() {
+            write!(w, "{}", x as i64)
+        } else {
+            super::write_real(w, x, v.ty() == super::attrs::ScalarType::F32)
+        }
+    };
     for (i, p) in raw.positions.iter().enumerate() {
         super::write_real(w, p.x, f32)?;
         w.write_all(b" ")?;
         super::write_real(w, p.y, f32)?;
         w.write_all(b" ")?;
         super::write_real(w, p.z, f32)?;
+        for v in normals.iter().flatten() {
+            val(w, *v, i)?;
+        }
+        for v in &color_props {
+            val(w, *v, i)?;
+        }
         if let Some(c) = colors.and_then(|c| c.get(i)) {
             write!(
                 w,
@@ -301,6 +427,9 @@ pub(crate) fn write<W: Write>(w: &mut W, raw: &RawMesh) -> std::io::Result<()> {
                 color_byte(c[1]),
                 color_byte(c[2])
             )?;
+        }
+        for v in st.iter().flatten() {
+            val(w, *v, i)?;
         }
         w.write_all(b"\n")?;
     }

@@ -7,6 +7,7 @@
 //! are fanned. The header's counts are checked against the bytes that follow it
 //! before anything is allocated.
 
+use super::attrs::{Corners, PlyExtras, PropData, Property, ScalarType, Values};
 use super::text::{has_nul, parse_coord, parse_coord_f32, parse_f64, parse_i64, show, tokens};
 use super::text::{Lines, Next, MAX_LINE};
 use super::{color_byte, unit_color, Caps, MAX_ELEMENTS};
@@ -147,7 +148,8 @@ pub(crate) fn read<R: BufRead>(
     caps: &Caps,
 ) -> Result<RawMesh, IoError> {
     let mut lines = Lines::new(reader);
-    let (encoding, elements) = read_header(path, &mut lines)?;
+    let mut header = Vec::new();
+    let (encoding, elements) = read_header(path, &mut lines, &mut header)?;
     let remaining = len.saturating_sub(lines.consumed());
 
     // Roles and sanity of the header before any allocation.
@@ -224,13 +226,14 @@ pub(crate) fn read<R: BufRead>(
                 list.push(t);
                 r
             }
-            (_, Kind::List(..)) => {
+            (Role::X | Role::Y | Role::Z, Kind::List(..)) => {
                 return Err(malformed(
                     path,
                     Some(vel.line),
                     format!("vertex property '{}' is a list, expected a number", p.name),
                 ))
             }
+            (_, Kind::List(..)) => Role::Skip,
         };
         roles.push(role);
     }
@@ -244,7 +247,10 @@ pub(crate) fn read<R: BufRead>(
     let has_color = color_types.len() == 3;
     let mut notes = Vec::new();
     if !color_types.is_empty() && !has_color {
-        notes.push("PLY vertex colours dropped: not all of red, green, blue present".to_string());
+        notes.push(
+            "PLY colour channels kept as properties but not used as vertex colours: not all of red, green, blue present"
+                .to_string(),
+        );
         for r in roles.iter_mut() {
             if matches!(r, Role::R | Role::G | Role::B) {
                 *r = Role::Skip;
@@ -294,6 +300,39 @@ pub(crate) fn read<R: BufRead>(
         raw.colors = Some(Vec::with_capacity(cap(vel)));
     }
     raw.faces.reserve(cap(fel));
+    // every vertex property but x, y, z is kept, with its type
+    let mut vkeep = Vec::with_capacity(vel.props.len());
+    for p in &vel.props {
+        if matches!(p.name.as_str(), "x" | "y" | "z") {
+            vkeep.push(None);
+        } else {
+            vkeep.push(Some(raw.attrs.vertex.len()));
+            raw.attrs.vertex.push(new_property(p, cap(vel)));
+        }
+    }
+    // every face property but the indices is kept (per triangle); a float list
+    // `texcoord` becomes the corners' texture coordinates
+    let mut texcoord = None;
+    let mut fkeep = Vec::with_capacity(fel.props.len());
+    for (k, p) in fel.props.iter().enumerate() {
+        if Some(k) == index_prop {
+            fkeep.push(FaceKeep::Indices);
+        } else if let (true, Kind::List(c, t)) =
+            (p.name == "texcoord" && texcoord.is_none(), p.kind)
+        {
+            texcoord = Some((attr_type(c), attr_type(t)));
+            raw.attrs.uv = Some(Corners::default());
+            fkeep.push(FaceKeep::TexCoord);
+        } else {
+            fkeep.push(FaceKeep::Prop(raw.attrs.face.len()));
+            raw.attrs.face.push(new_property(p, cap(fel)));
+        }
+    }
+    let mut extras = PlyExtras {
+        header,
+        elements: Vec::new(),
+        texcoord,
+    };
 
     let mut body = Body {
         path,
@@ -321,20 +360,24 @@ pub(crate) fn read<R: BufRead>(
         body.element.clear();
         body.element.push_str(&el.name);
         if k == vi {
-            read_vertices(&mut body, el, &roles, &mut raw)?;
+            read_vertices(&mut body, el, &roles, &vkeep, &mut raw)?;
         } else if k == fi {
-            polygons = read_faces(&mut body, el, index_prop, vel.count, caps, &mut raw)?;
+            polygons = read_faces(&mut body, el, &fkeep, vel.count, caps, &mut raw, &mut notes)?;
         } else {
+            let mut props: Vec<Property> =
+                el.props.iter().map(|p| new_property(p, cap(el))).collect();
+            let mut scratch = Vec::new();
             for i in 0..el.count {
                 body.begin(i, el.count)?;
-                for p in &el.props {
-                    body.skip(p.kind)?;
+                for (p, keep) in el.props.iter().zip(props.iter_mut()) {
+                    body.keep(p.kind, &mut scratch)?;
+                    push_kept(&mut keep.data, &scratch);
                 }
                 body.end()?;
             }
-            if el.count > 0 {
-                notes.push(format!("skipped {} PLY '{}' elements", el.count, el.name));
-            }
+            extras
+                .elements
+                .push((el.name.clone(), el.count as usize, props));
         }
     }
     if body.has_trailing_data()? {
@@ -345,13 +388,81 @@ pub(crate) fn read<R: BufRead>(
             "fanned {polygons} PLY polygons with more than 3 vertices into triangles"
         ));
     }
+    if !extras.header.is_empty() || !extras.elements.is_empty() || extras.texcoord.is_some() {
+        raw.attrs.ply = Some(extras);
+    }
     raw.notes = notes;
     Ok(raw)
+}
+
+/// What a face property is read into.
+#[derive(Clone, Copy)]
+enum FaceKeep {
+    Indices,
+    TexCoord,
+    Prop(usize),
+}
+
+fn attr_type(t: Scalar) -> ScalarType {
+    match t {
+        Scalar::I8 => ScalarType::I8,
+        Scalar::U8 => ScalarType::U8,
+        Scalar::I16 => ScalarType::I16,
+        Scalar::U16 => ScalarType::U16,
+        Scalar::I32 => ScalarType::I32,
+        Scalar::U32 => ScalarType::U32,
+        Scalar::F32 => ScalarType::F32,
+        Scalar::F64 => ScalarType::F64,
+    }
+}
+
+fn type_name(t: ScalarType) -> &'static str {
+    match t {
+        ScalarType::I8 => "char",
+        ScalarType::U8 => "uchar",
+        ScalarType::I16 => "short",
+        ScalarType::U16 => "ushort",
+        ScalarType::I32 => "int",
+        ScalarType::U32 => "uint",
+        ScalarType::F32 => "float",
+        ScalarType::F64 => "double",
+    }
+}
+
+/// An empty kept property of a header property's types.
+fn new_property(p: &Prop, capacity: usize) -> Property {
+    let data = match p.kind {
+        Kind::Scalar(t) => PropData::Scalar(Values::new(attr_type(t), capacity)),
+        Kind::List(c, t) => PropData::List {
+            count: attr_type(c),
+            starts: vec![0],
+            items: Values::new(attr_type(t), capacity),
+        },
+    };
+    Property {
+        name: p.name.clone(),
+        data,
+    }
+}
+
+/// Appends the values read by [`Body::keep`] (a scalar: one value; a list: its
+/// items).
+fn push_kept(data: &mut PropData, vals: &[f64]) {
+    match data {
+        PropData::Scalar(v) => v.push_f64(vals.first().copied().unwrap_or(0.0)),
+        PropData::List { starts, items, .. } => {
+            for &x in vals {
+                items.push_f64(x);
+            }
+            starts.push(items.len() as u64);
+        }
+    }
 }
 
 fn read_header<R: BufRead>(
     path: &Path,
     lines: &mut Lines<R>,
+    header: &mut Vec<String>,
 ) -> Result<(Encoding, Vec<Element>), IoError> {
     let mut encoding = None;
     let mut elements: Vec<Element> = Vec::new();
@@ -401,7 +512,9 @@ fn read_header<R: BufRead>(
                     }
                 });
             }
-            b"comment" | b"obj_info" => {}
+            b"comment" | b"obj_info" => {
+                header.push(String::from_utf8_lossy(line.trim_ascii()).into_owned());
+            }
             b"element" => {
                 let (Some(name), Some(count)) = (t.next(), t.next()) else {
                     return Err(bad("an element line needs a name and a count".into()));
@@ -652,24 +765,6 @@ impl<R: BufRead> Body<'_, R> {
         }
     }
 
-    /// Any finite number (colours).
-    fn number(&mut self, t: Scalar) -> Result<f64, IoError> {
-        let v = match self.bin(t) {
-            Some(res) => res.map_err(|e| self.bin_err(e))?,
-            None => {
-                let r = self.token()?;
-                let tok = self.tok_bytes(r);
-                parse_f64(tok)
-                    .ok_or_else(|| self.err(format!("'{}' is not a number", show(tok))))?
-            }
-        };
-        if v.is_finite() {
-            Ok(v)
-        } else {
-            Err(self.err("non-finite value"))
-        }
-    }
-
     /// An integer (list counts, indices).
     fn int(&mut self, t: Scalar) -> Result<i64, IoError> {
         match self.bin(t) {
@@ -702,35 +797,41 @@ impl<R: BufRead> Body<'_, R> {
         u64::try_from(n).map_err(|_| self.err(format!("negative list length {n}")))
     }
 
-    /// Skips one property.
-    fn skip(&mut self, kind: Kind) -> Result<(), IoError> {
-        match kind {
-            Kind::Scalar(t) => self.skip_values(t, 1),
-            Kind::List(c, t) => {
-                let n = self.count(c)?;
-                self.skip_values(t, n)
-            }
+    /// A value of any type kept as it is (NaN and infinities included): exact in
+    /// `f64` for every PLY type; ASCII `float` is parsed straight to `f32`.
+    fn value(&mut self, t: Scalar) -> Result<f64, IoError> {
+        if let Some(res) = self.bin(t) {
+            return res.map_err(|e| self.bin_err(e));
         }
+        if t.is_int() {
+            return self.int(t).map(|v| v as f64);
+        }
+        let r = self.token()?;
+        let tok = self.tok_bytes(r);
+        let v = if t == Scalar::F32 {
+            std::str::from_utf8(tok)
+                .ok()
+                .and_then(|s| s.parse::<f32>().ok())
+                .map(f64::from)
+        } else {
+            parse_f64(tok)
+        };
+        v.ok_or_else(|| self.err(format!("'{}' is not a number", show(tok))))
     }
 
-    fn skip_values(&mut self, t: Scalar, n: u64) -> Result<(), IoError> {
-        let bytes = n.saturating_mul(t.size());
-        let copied = match &mut self.src {
-            Src::Binary { r, .. } => {
-                std::io::copy(&mut r.by_ref().take(bytes), &mut std::io::sink())
-            }
-            Src::Ascii { .. } => {
+    /// Reads one property into `out` (a scalar: one value; a list: its items).
+    fn keep(&mut self, kind: Kind, out: &mut Vec<f64>) -> Result<(), IoError> {
+        out.clear();
+        match kind {
+            Kind::Scalar(t) => out.push(self.value(t)?),
+            Kind::List(c, t) => {
+                let n = self.count(c)?;
                 for _ in 0..n {
-                    self.token()?;
+                    out.push(self.value(t)?);
                 }
-                return Ok(());
             }
-        };
-        match copied {
-            Ok(c) if c == bytes => Ok(()),
-            Ok(_) => Err(self.bin_err(std::io::ErrorKind::UnexpectedEof.into())),
-            Err(e) => Err(self.bin_err(e)),
         }
+        Ok(())
     }
 
     fn has_trailing_data(&mut self) -> Result<bool, IoError> {
@@ -766,27 +867,44 @@ fn read_vertices<R: BufRead>(
     body: &mut Body<'_, R>,
     el: &Element,
     roles: &[Role],
+    keep: &[Option<usize>],
     raw: &mut RawMesh,
 ) -> Result<(), IoError> {
-    let layout = binary_vertex_layout(body, el, roles);
+    let layout = binary_vertex_layout(body, el, roles, keep);
+    let mut scratch = Vec::new();
+    let mut fast_scratch = Vec::new();
     for i in 0..el.count {
         if let Some((layout, size)) = &layout {
-            if fast_vertex(body, layout, *size, raw) {
+            if fast_vertex(body, layout, *size, raw, &mut fast_scratch) {
                 continue;
             }
         }
         body.begin(i, el.count)?;
         let mut p = DVec3::ZERO;
         let mut c = [0.0f32; 3];
-        for (prop, &role) in el.props.iter().zip(roles) {
+        for ((prop, &role), &k) in el.props.iter().zip(roles).zip(keep) {
             match (role, prop.kind) {
                 (Role::X, Kind::Scalar(t)) => p.x = body.coord(t)?,
                 (Role::Y, Kind::Scalar(t)) => p.y = body.coord(t)?,
                 (Role::Z, Kind::Scalar(t)) => p.z = body.coord(t)?,
-                (Role::R, Kind::Scalar(t)) => c[0] = color_value(body.number(t)?, t),
-                (Role::G, Kind::Scalar(t)) => c[1] = color_value(body.number(t)?, t),
-                (Role::B, Kind::Scalar(t)) => c[2] = color_value(body.number(t)?, t),
-                (_, kind) => body.skip(kind)?,
+                (_, kind) => {
+                    body.keep(kind, &mut scratch)?;
+                    if let (Kind::Scalar(t), Some(&v)) = (kind, scratch.first()) {
+                        // a colour must be a number (other properties keep any value)
+                        if matches!(role, Role::R | Role::G | Role::B) && !v.is_finite() {
+                            return Err(body.err("non-finite value"));
+                        }
+                        match role {
+                            Role::R => c[0] = color_value(v, t),
+                            Role::G => c[1] = color_value(v, t),
+                            Role::B => c[2] = color_value(v, t),
+                            _ => {}
+                        }
+                    }
+                    if let Some(prop) = k.and_then(|k| raw.attrs.vertex.get_mut(k)) {
+                        push_kept(&mut prop.data, &scratch);
+                    }
+                }
             }
         }
         body.end()?;
@@ -823,8 +941,9 @@ fn decode(b: &[u8], t: Scalar, be: bool) -> Option<f64> {
     })
 }
 
-/// Where one vertex property sits in a binary record: offset, type, role.
-type Field = (usize, Scalar, Role);
+/// Where one vertex property sits in a binary record: offset, type, role, and the
+/// kept property it goes to.
+type Field = (usize, Scalar, Role, Option<usize>);
 
 /// For a binary vertex element of scalars only: each property's field and the
 /// record size (the fast path of [`read_vertices`]).
@@ -832,30 +951,32 @@ fn binary_vertex_layout<R>(
     body: &Body<'_, R>,
     el: &Element,
     roles: &[Role],
+    keep: &[Option<usize>],
 ) -> Option<(Vec<Field>, usize)> {
     if !matches!(body.src, Src::Binary { .. }) {
         return None;
     }
     let mut layout = Vec::with_capacity(el.props.len());
     let mut off = 0usize;
-    for (p, &role) in el.props.iter().zip(roles) {
+    for ((p, &role), &k) in el.props.iter().zip(roles).zip(keep) {
         let Kind::Scalar(t) = p.kind else {
             return None;
         };
-        layout.push((off, t, role));
+        layout.push((off, t, role, k));
         off += t.size() as usize;
     }
     Some((layout, off))
 }
 
 /// Binary fast path: decodes one vertex straight from the reader's buffer when the
-/// buffer holds the whole record and every value is valid; false (nothing consumed)
-/// otherwise, and the generic path reads it (and reports any error).
+/// buffer holds the whole record and every coordinate is valid; false (nothing
+/// consumed) otherwise, and the generic path reads it (and reports any error).
 fn fast_vertex<R: BufRead>(
     body: &mut Body<'_, R>,
     layout: &[Field],
     size: usize,
     raw: &mut RawMesh,
+    kept: &mut Vec<(usize, f64)>,
 ) -> bool {
     let Src::Binary { r, be } = &mut body.src else {
         return false;
@@ -869,17 +990,21 @@ fn fast_vertex<R: BufRead>(
     };
     let mut p = DVec3::ZERO;
     let mut c = [0.0f32; 3];
-    for &(off, t, role) in layout {
-        if role == Role::Skip {
+    kept.clear();
+    for &(off, t, role, k) in layout {
+        if role == Role::Skip && k.is_none() {
             continue;
         }
         let Some(v) = rec.get(off..).and_then(|b| decode(b, t, be)) else {
             return false;
         };
-        if !v.is_finite() {
-            return false;
+        if let Some(k) = k {
+            kept.push((k, v));
         }
         match role {
+            Role::X | Role::Y | Role::Z | Role::R | Role::G | Role::B if !v.is_finite() => {
+                return false
+            }
             Role::X => p.x = v,
             Role::Y => p.y = v,
             Role::Z => p.z = v,
@@ -893,6 +1018,11 @@ fn fast_vertex<R: BufRead>(
     raw.positions.push(p);
     if let Some(cs) = raw.colors.as_mut() {
         cs.push(c);
+    }
+    for &(k, v) in kept.iter() {
+        if let Some(PropData::Scalar(vals)) = raw.attrs.vertex.get_mut(k).map(|p| &mut p.data) {
+            vals.push_f64(v);
+        }
     }
     true
 }
@@ -944,19 +1074,22 @@ fn fast_triangle<R: BufRead>(
     true
 }
 
-/// Reads the faces; returns the number of polygons fanned.
+/// Reads the faces (and their kept properties, per triangle); returns the number
+/// of polygons fanned.
 fn read_faces<R: BufRead>(
     body: &mut Body<'_, R>,
     el: &Element,
-    index_prop: Option<usize>,
+    keep: &[FaceKeep],
     num_vertices: u64,
     caps: &Caps,
     raw: &mut RawMesh,
+    notes: &mut Vec<String>,
 ) -> Result<u64, IoError> {
     let mut polygons = 0;
+    let mut bad_texcoord = 0u64;
     // Binary fast path: a face element holding only a `list uchar int|uint` of indices.
     let fast = matches!(body.src, Src::Binary { .. })
-        && index_prop == Some(0)
+        && matches!(keep, [FaceKeep::Indices])
         && matches!(
             el.props.as_slice(),
             [Prop {
@@ -964,25 +1097,24 @@ fn read_faces<R: BufRead>(
                 ..
             }]
         );
+    let mut corners: Vec<u32> = Vec::new();
+    let mut values: Vec<Vec<f64>> = vec![Vec::new(); el.props.len()];
     for i in 0..el.count {
         if fast && fast_triangle(body, num_vertices, caps, raw) {
             continue;
         }
         body.begin(i, el.count)?;
-        for (k, prop) in el.props.iter().enumerate() {
-            match prop.kind {
-                Kind::List(c, t) if Some(k) == index_prop => {
+        corners.clear();
+        for (k, (prop, &what)) in el.props.iter().zip(keep).enumerate() {
+            match (what, prop.kind) {
+                (FaceKeep::Indices, Kind::List(c, t)) => {
                     let n = body.count(c)?;
                     if n < 3 {
                         return Err(
                             body.err(format!("a face needs at least 3 vertices, found {n}"))
                         );
                     }
-                    if n > 3 {
-                        polygons += 1;
-                    }
-                    let (mut first, mut prev) = (0u32, 0u32);
-                    for j in 0..n {
+                    for _ in 0..n {
                         let v = body.int(t)?;
                         let v = u32::try_from(v)
                             .ok()
@@ -992,32 +1124,87 @@ fn read_faces<R: BufRead>(
                                     "vertex index {v} out of range ({num_vertices} vertices)"
                                 ))
                             })?;
-                        match j {
-                            0 => first = v,
-                            1 => prev = v,
-                            _ => {
-                                if raw.faces.len() as u64 >= caps.faces() {
-                                    return Err(body.err(caps.face_msg(None)));
-                                }
-                                raw.faces.push([first, prev, v]);
-                                prev = v;
-                            }
-                        }
+                        corners.push(v);
                     }
                 }
-                kind => body.skip(kind)?,
+                (_, kind) => {
+                    let slot = values
+                        .get_mut(k)
+                        .ok_or_else(|| body.err("internal: property"))?;
+                    body.keep(kind, slot)?;
+                }
             }
         }
         body.end()?;
+        let n = corners.len();
+        if n > 3 {
+            polygons += 1;
+        }
+        let tris = n.saturating_sub(2);
+        if raw.faces.len() as u64 + tris as u64 > caps.faces() {
+            return Err(body.err(caps.face_msg(None)));
+        }
+        for j in 2..n {
+            if let (Some(&a), Some(&b), Some(&c)) =
+                (corners.first(), corners.get(j - 1), corners.get(j))
+            {
+                raw.faces.push([a, b, c]);
+            }
+        }
+        for (&what, vals) in keep.iter().zip(&values) {
+            match what {
+                FaceKeep::Indices => {}
+                FaceKeep::Prop(p) => {
+                    if let Some(prop) = raw.attrs.face.get_mut(p) {
+                        for _ in 0..tris {
+                            push_kept(&mut prop.data, vals);
+                        }
+                    }
+                }
+                FaceKeep::TexCoord => {
+                    if let Some(uv) = raw.attrs.uv.as_mut() {
+                        if vals.len() == 2 * n {
+                            let base = uv.values.len() as u32;
+                            for c in vals.chunks_exact(2) {
+                                uv.values.push([c[0], c[1]]);
+                            }
+                            for j in 2..n as u32 {
+                                uv.index.push(Some([base, base + j - 1, base + j]));
+                            }
+                        } else {
+                            bad_texcoord += 1;
+                            uv.index.extend(std::iter::repeat_n(None, tris));
+                        }
+                    }
+                }
+            }
+        }
+    }
+    // faces read by the fast path carry nothing else
+    if let Some(uv) = raw.attrs.uv.as_mut() {
+        uv.index.resize(raw.faces.len(), None);
+    }
+    if bad_texcoord > 0 {
+        notes.push(format!(
+            "{bad_texcoord} PLY faces have a texcoord list that is not two values per corner: they have no texture coordinates"
+        ));
     }
     Ok(polygons)
 }
 
 /// Writes a PLY file in `raw.encoding`: `float` coordinates when the precision is
-/// `F32`, else `double`; `uchar` colours; `uchar`/`int` index lists.
+/// `F32`, else `double`; every kept vertex and face property with its type (input
+/// values bit for bit); `uchar` colours when the colours are not among them;
+/// `uchar`/`int` index lists; the corners' texture coordinates as a face
+/// `texcoord` list; the input's comment/obj_info lines and other elements.
 pub(crate) fn write<W: Write>(w: &mut W, raw: &RawMesh) -> std::io::Result<()> {
     let f32 = raw.precision == Precision::F32;
-    let colors = raw.colors.as_deref();
+    let a = &raw.attrs;
+    let has_color_props = a
+        .vertex
+        .iter()
+        .any(|p| matches!(p.name.as_str(), "red" | "diffuse_red" | "r"));
+    let colors = raw.colors.as_deref().filter(|_| !has_color_props);
     let index_type = if raw.positions.len() > i32::MAX as usize {
         "uint"
     } else {
@@ -1029,74 +1216,220 @@ pub(crate) fn write<W: Write>(w: &mut W, raw: &RawMesh) -> std::io::Result<()> {
         Encoding::BinaryBigEndian => "binary_big_endian",
     };
     let real = if f32 { "float" } else { "double" };
+    let ply = a.ply.as_ref();
+    write!(w, "ply\nformat {format} 1.0\n")?;
+    for line in ply.map(|p| p.header.as_slice()).unwrap_or_default() {
+        // one line each: a line break inside would start a header line of its own
+        writeln!(w, "{}", line.replace(['\n', '\r'], " "))?;
+    }
     write!(
         w,
-        "ply\nformat {format} 1.0\ncomment written by holefill\nelement vertex {}\n\
+        "comment written by holefill\nelement vertex {}\n\
          property {real} x\nproperty {real} y\nproperty {real} z\n",
         raw.positions.len()
     )?;
+    let declare = |w: &mut W, p: &Property| -> std::io::Result<()> {
+        match &p.data {
+            PropData::Scalar(v) => writeln!(w, "property {} {}", type_name(v.ty()), p.name),
+            PropData::List { count, items, .. } => writeln!(
+                w,
+                "property list {} {} {}",
+                type_name(*count),
+                type_name(items.ty()),
+                p.name
+            ),
+        }
+    };
+    for p in &a.vertex {
+        declare(w, p)?;
+    }
     if colors.is_some() {
         w.write_all(b"property uchar red\nproperty uchar green\nproperty uchar blue\n")?;
     }
     write!(
         w,
-        "element face {}\nproperty list uchar {index_type} vertex_indices\nend_header\n",
+        "element face {}\nproperty list uchar {index_type} vertex_indices\n",
         raw.faces.len()
     )?;
-    match raw.encoding {
-        Encoding::Ascii => {
-            for (i, p) in raw.positions.iter().enumerate() {
-                super::write_real(w, p.x, f32)?;
-                w.write_all(b" ")?;
-                super::write_real(w, p.y, f32)?;
-                w.write_all(b" ")?;
-                super::write_real(w, p.z, f32)?;
-                if let Some(c) = colors.and_then(|c| c.get(i)) {
-                    write!(
-                        w,
-                        " {} {} {}",
-                        color_byte(c[0]),
-                        color_byte(c[1]),
-                        color_byte(c[2])
-                    )?;
-                }
-                w.write_all(b"\n")?;
-            }
-            for f in &raw.faces {
-                writeln!(w, "3 {} {} {}", f[0], f[1], f[2])?;
+    for p in &a.face {
+        declare(w, p)?;
+    }
+    let texcoord = a.uv.as_ref().map(|_| {
+        ply.and_then(|p| p.texcoord)
+            .unwrap_or((ScalarType::U8, ScalarType::F32))
+    });
+    if let Some((c, t)) = texcoord {
+        writeln!(
+            w,
+            "property list {} {} texcoord",
+            type_name(c),
+            type_name(t)
+        )?;
+    }
+    for (name, n, props) in ply.map(|p| p.elements.as_slice()).unwrap_or_default() {
+        writeln!(w, "element {name} {n}")?;
+        for p in props {
+            declare(w, p)?;
+        }
+    }
+    w.write_all(b"end_header\n")?;
+
+    let be = match raw.encoding {
+        Encoding::Ascii => None,
+        Encoding::BinaryLittleEndian => Some(false),
+        Encoding::BinaryBigEndian => Some(true),
+    };
+    let mut rec: Vec<u8> = Vec::with_capacity(64);
+    let mut out = Out { be, rec: &mut rec };
+    for (i, p) in raw.positions.iter().enumerate() {
+        out.rec.clear();
+        for v in [p.x, p.y, p.z] {
+            if f32 {
+                out.real(v, ScalarType::F32);
+            } else {
+                out.real(v, ScalarType::F64);
             }
         }
-        Encoding::BinaryLittleEndian | Encoding::BinaryBigEndian => {
-            let be = raw.encoding == Encoding::BinaryBigEndian;
-            let mut rec: Vec<u8> = Vec::with_capacity(27);
-            for (i, p) in raw.positions.iter().enumerate() {
-                rec.clear();
-                for v in [p.x, p.y, p.z] {
-                    match (f32, be) {
-                        (true, false) => rec.extend_from_slice(&(v as f32).to_le_bytes()),
-                        (true, true) => rec.extend_from_slice(&(v as f32).to_be_bytes()),
-                        (false, false) => rec.extend_from_slice(&v.to_le_bytes()),
-                        (false, true) => rec.extend_from_slice(&v.to_be_bytes()),
+        for p in &a.vertex {
+            out.prop(&p.data, i);
+        }
+        if let Some(c) = colors.and_then(|c| c.get(i)) {
+            for &c in c {
+                out.int(i64::from(color_byte(c)), ScalarType::U8);
+            }
+        }
+        out.finish(w)?;
+    }
+    let uv = a.uv.as_ref();
+    for (k, f) in raw.faces.iter().enumerate() {
+        out.rec.clear();
+        out.int(3, ScalarType::U8);
+        let it = if index_type == "uint" {
+            ScalarType::U32
+        } else {
+            ScalarType::I32
+        };
+        for &i in f {
+            out.int(i64::from(i), it);
+        }
+        for p in &a.face {
+            out.prop(&p.data, k);
+        }
+        if let (Some(uv), Some((c, t))) = (uv, texcoord) {
+            match uv.index.get(k).copied().flatten() {
+                Some(idx) => {
+                    out.int(6, c);
+                    for i in idx {
+                        let v = uv.values.get(i as usize).copied().unwrap_or([0.0; 2]);
+                        out.real(v[0], t);
+                        out.real(v[1], t);
                     }
                 }
-                if let Some(c) = colors.and_then(|c| c.get(i)) {
-                    rec.extend(c.iter().map(|&c| color_byte(c)));
-                }
-                w.write_all(&rec)?;
+                None => out.int(0, c),
             }
-            for f in &raw.faces {
-                rec.clear();
-                rec.push(3);
-                for i in f {
-                    if be {
-                        rec.extend_from_slice(&i.to_be_bytes());
-                    } else {
-                        rec.extend_from_slice(&i.to_le_bytes());
-                    }
-                }
-                w.write_all(&rec)?;
+        }
+        out.finish(w)?;
+    }
+    for (_, n, props) in ply.map(|p| p.elements.as_slice()).unwrap_or_default() {
+        for i in 0..*n {
+            out.rec.clear();
+            for p in props {
+                out.prop(&p.data, i);
             }
+            out.finish(w)?;
         }
     }
     Ok(())
+}
+
+/// One element's record being written: binary bytes (`be`: byte order) or ASCII
+/// text, values separated by spaces.
+struct Out<'a> {
+    be: Option<bool>,
+    rec: &'a mut Vec<u8>,
+}
+
+impl Out<'_> {
+    fn sep(&mut self) {
+        if self.be.is_none() && !self.rec.is_empty() {
+            self.rec.push(b' ');
+        }
+    }
+    /// An integer of type `t` (binary: its bytes).
+    fn int(&mut self, v: i64, t: ScalarType) {
+        self.sep();
+        match self.be {
+            None => {
+                use std::io::Write as _;
+                let _ = write!(self.rec, "{v}");
+            }
+            Some(be) => {
+                let mut one = Values::new(t, 1);
+                one.push_f64(v as f64);
+                one.write_bytes(0, be, self.rec);
+            }
+        }
+    }
+    /// A real of type `t` (ASCII: shortest round-trip text of that type).
+    fn real(&mut self, v: f64, t: ScalarType) {
+        if t.is_int() {
+            return self.int(v.round() as i64, t);
+        }
+        self.sep();
+        match self.be {
+            None => {
+                let _ = super::write_real(self.rec, v, t == ScalarType::F32);
+            }
+            Some(be) => {
+                if t == ScalarType::F32 {
+                    let x = v as f32;
+                    self.rec
+                        .extend_from_slice(&if be { x.to_be_bytes() } else { x.to_le_bytes() });
+                } else {
+                    self.rec
+                        .extend_from_slice(&if be { v.to_be_bytes() } else { v.to_le_bytes() });
+                }
+            }
+        }
+    }
+    /// Value `k` of `vals`, in its type.
+    fn scalar(&mut self, vals: &Values, k: usize) {
+        match self.be {
+            Some(be) => vals.write_bytes(k, be, self.rec),
+            None => {
+                let v = vals.get(k).unwrap_or(0.0);
+                if vals.ty().is_int() {
+                    self.int(v as i64, vals.ty())
+                } else {
+                    self.real(v, vals.ty())
+                }
+            }
+        }
+    }
+    /// Value `i` of a kept property, in its type.
+    fn prop(&mut self, d: &PropData, i: usize) {
+        match d {
+            PropData::Scalar(v) => self.scalar(v, i),
+            PropData::List {
+                count,
+                starts,
+                items,
+            } => {
+                let (a, b) = match (starts.get(i), starts.get(i + 1)) {
+                    (Some(&a), Some(&b)) => (a as usize, b as usize),
+                    _ => (0, 0),
+                };
+                self.int((b - a) as i64, *count);
+                for k in a..b {
+                    self.scalar(items, k);
+                }
+            }
+        }
+    }
+    fn finish<W: Write>(&mut self, w: &mut W) -> std::io::Result<()> {
+        if self.be.is_none() {
+            self.rec.push(b'\n');
+        }
+        w.write_all(self.rec)
+    }
 }

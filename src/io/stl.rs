@@ -16,6 +16,7 @@
 //! numbering as one at a time; a test compares with a plain hash-map weld). The
 //! output arrays and the table are mapped by rayon's threads before the weld.
 
+use super::attrs::StlExtras;
 use super::text::{
     has_nul, parse_coord, show, strip_comment, tokens, Lines, Next, MAX_LINE, UTF8_BOM,
 };
@@ -295,7 +296,11 @@ pub(crate) fn read<R: BufRead>(
         .is_some_and(|s| s.eq_ignore_ascii_case(b"solid"));
     if let Some(n) = count {
         if 84 + 50 * u64::from(n) == len && !(is_solid && text_facets_follow(&head)) {
-            return read_binary(path, reader, n, caps);
+            let mut raw = read_binary(path, reader, n, caps)?;
+            if let (Some(h), Some(stl)) = (head.get(..80), raw.attrs.stl.as_mut()) {
+                stl.header.copy_from_slice(h);
+            }
+            return Ok(raw);
         }
     }
     if is_solid {
@@ -373,6 +378,8 @@ fn read_binary<R: Read>(
         }
     };
     let mut buf = Vec::with_capacity(50 * READ_TRIANGLES);
+    // Each facet's attribute bytes (kept only when one is not zero).
+    let mut attribute: Vec<u16> = Vec::new();
     // Triangles read so far.
     let mut t = 0usize;
     let mut corners = [([0f32; 3], [0u32; 3], 0usize); 3 * BATCH];
@@ -381,6 +388,21 @@ fn read_binary<R: Read>(
         let want = (50 * (n as usize - t).min(READ_TRIANGLES)) as u64;
         let got = (&mut reader).take(want).read_to_end(&mut buf);
         let whole = buf.len() / 50 * 50;
+        for (k, rec) in buf
+            .get(..whole)
+            .unwrap_or_default()
+            .chunks_exact(50)
+            .enumerate()
+        {
+            if let Some(&[a, b]) = rec.get(48..50) {
+                if (a, b) != (0, 0) && attribute.is_empty() {
+                    attribute = vec![0; n as usize];
+                }
+                if let Some(slot) = attribute.get_mut(t + k) {
+                    *slot = u16::from_le_bytes([a, b]);
+                }
+            }
+        }
         for batch in buf.get(..whole).unwrap_or_default().chunks(50 * BATCH) {
             let recs = batch.chunks_exact(50);
             for (c, (rec, k)) in corners
@@ -435,6 +457,10 @@ fn read_binary<R: Read>(
     }
     raw.positions.truncate(welder.vertices);
     welder.note(&mut raw);
+    raw.attrs.stl = Some(StlExtras {
+        header: [0; 80],
+        attribute,
+    });
     Ok(raw)
 }
 
@@ -595,16 +621,28 @@ pub(crate) fn write<W: Write>(w: &mut W, raw: &RawMesh) -> std::io::Result<()> {
         }
         w.write_all(b"endsolid holefill\n")?;
     } else {
-        let mut header = [b' '; 80];
-        let text = b"binary STL written by holefill";
-        for (h, t) in header.iter_mut().zip(text) {
-            *h = *t;
-        }
+        let stl = raw.attrs.stl.as_ref();
+        let header = match stl {
+            Some(s) => s.header,
+            None => {
+                let mut header = [b' '; 80];
+                let text = b"binary STL written by holefill";
+                for (h, t) in header.iter_mut().zip(text) {
+                    *h = *t;
+                }
+                header
+            }
+        };
         w.write_all(&header)?;
         let n = u32::try_from(raw.faces.len()).unwrap_or(u32::MAX);
         w.write_all(&n.to_le_bytes())?;
         let mut rec = [0u8; 50];
-        for f in &raw.faces {
+        let attribute = stl.map(|s| s.attribute.as_slice()).unwrap_or_default();
+        for (k, f) in raw.faces.iter().enumerate() {
+            let a = attribute.get(k).copied().unwrap_or(0).to_le_bytes();
+            if let Some(slot) = rec.get_mut(48..50) {
+                slot.copy_from_slice(&a);
+            }
             let n = normal(raw, f).as_vec3();
             let vals = [
                 n,

@@ -680,6 +680,7 @@ impl Mesh {
             precision: template.precision,
             encoding: template.encoding,
             notes: Vec::new(),
+            attrs: Default::default(),
         }
     }
 

@@ -11,10 +11,13 @@
 //! vertices added by the builder (copies of split non-manifold vertices) or by hole
 //! filling are appended.
 
+pub mod attributes;
 mod build;
+mod error;
 mod ids;
 
 pub use build::BuildReport;
+pub use error::TopologyError;
 pub use ids::{FaceId, HalfedgeId, VertexId};
 
 use glam::DVec3;
@@ -191,7 +194,11 @@ impl Topology {
     /// vertex with a counting sort over the new faces' vertices (sorted, found by
     /// binary search), and each vertex's short list is searched for an end vertex
     /// (a patch of 1,800 faces: 0.5 ms with two hash maps, serial in the fill).
-    pub fn add_faces(&mut self, new: &[[VertexId; 3]], num_vertices: usize) -> Result<(), String> {
+    pub fn add_faces(
+        &mut self,
+        new: &[[VertexId; 3]],
+        num_vertices: usize,
+    ) -> Result<(), TopologyError> {
         if self.anchor.len() < num_vertices {
             self.anchor.resize(num_vertices, None);
         }
@@ -203,7 +210,7 @@ impl Topology {
         touched.dedup();
         if let Some(&v) = touched.last() {
             if v.idx() >= self.anchor.len() {
-                return Err(format!("vertex {v} out of range"));
+                return Err(TopologyError::VertexOutOfRange(v));
             }
         }
         // the new vertices of a patch are one run of ids at the end of `touched`: an
@@ -268,7 +275,7 @@ impl Topology {
         // directed edge that exists already or comes in an earlier new face
         for (fi, f) in new.iter().enumerate() {
             if f[0] == f[1] || f[1] == f[2] || f[0] == f[2] {
-                return Err(format!("new face {fi} repeats a vertex"));
+                return Err(TopologyError::NewFaceRepeatsVertex(fi));
             }
             for c in 0..3 {
                 let (a, b) = (f[c], f[(c + 1) % 3]);
@@ -277,7 +284,7 @@ impl Topology {
                     .iter()
                     .any(|&(e, g)| e == b && (g.0 < first_new || g.0 < h.0))
                 {
-                    return Err(format!("directed edge {a}->{b} would be used twice"));
+                    return Err(TopologyError::DirectedEdgeTaken(a, b));
                 }
             }
         }
@@ -298,7 +305,7 @@ impl Topology {
                     }
                 } else {
                     if self.twin(t).is_some() {
-                        return Err(format!("edge {a}-{b} would get a third face"));
+                        return Err(TopologyError::ThirdFace(a, b));
                     }
                     links.push((h, t));
                 }
@@ -348,21 +355,27 @@ impl Topology {
     /// Linear time and memory (no hashing): the half-edges are grouped by their start
     /// vertex with a counting sort, and each vertex's (short) list of end vertices is
     /// sorted to find a repeated directed edge and to look up opposites.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), TopologyError> {
         let nv = self.anchor.len();
         if self.twin.len() != self.faces.len() * 3 {
-            return Err("twin array size".into());
+            return Err(TopologyError::TwinArraySize);
         }
         if self.twin.len() > u32::MAX as usize {
-            return Err("more half-edges than 32-bit indices can hold".into());
+            return Err(TopologyError::TooManyHalfEdges);
         }
         for (fi, f) in self.faces.iter().enumerate() {
             for c in 0..3 {
                 if f[c].idx() >= nv {
-                    return Err(format!("face {fi} references vertex {} out of range", f[c]));
+                    return Err(TopologyError::FaceVertexOutOfRange {
+                        face: fi,
+                        vertex: f[c],
+                    });
                 }
                 if f[c] == f[(c + 1) % 3] {
-                    return Err(format!("face {fi} repeats vertex {}", f[c]));
+                    return Err(TopologyError::FaceRepeatsVertex {
+                        face: fi,
+                        vertex: f[c],
+                    });
                 }
             }
         }
@@ -378,7 +391,7 @@ impl Topology {
             let list = &mut ends[a..b];
             list.sort_unstable();
             if let Some(w) = list.windows(2).find(|w| w[0] == w[1]) {
-                return Err(format!("directed edge {v}->{} used twice", w[0]));
+                return Err(TopologyError::DirectedEdgeTwice { from: v, to: w[0] });
             }
         }
         let ends_of = |v: usize| -> &[u32] {
@@ -389,20 +402,20 @@ impl Topology {
             let h = HalfedgeId::from_idx(i);
             if let Some(t) = *t {
                 if self.twin(t) != Some(h) {
-                    return Err(format!("twin of half-edge {i} is not symmetric"));
+                    return Err(TopologyError::TwinNotSymmetric(i));
                 }
                 if self.from(t) != self.to(h) || self.to(t) != self.from(h) {
-                    return Err(format!("half-edge {i} and its twin do not share endpoints"));
+                    return Err(TopologyError::TwinEndpoints(i));
                 }
             } else if ends_of(self.to(h).idx())
                 .binary_search(&self.from(h).0)
                 .is_ok()
             {
-                return Err(format!(
-                    "boundary half-edge {i} ({}->{}) has an unlinked opposite",
-                    self.from(h),
-                    self.to(h)
-                ));
+                return Err(TopologyError::UnlinkedOpposite {
+                    half_edge: i,
+                    from: self.from(h),
+                    to: self.to(h),
+                });
             }
         }
         let corners = |v: usize| off[v + 1] - off[v];
@@ -410,17 +423,19 @@ impl Topology {
             let count = corners(vi);
             let v = VertexId::from_idx(vi);
             match self.anchor[vi] {
-                None if count > 0 => return Err(format!("vertex {vi} has faces but no anchor")),
+                None if count > 0 => return Err(TopologyError::NoAnchor(vi)),
                 None => {}
                 Some(h) => {
                     if self.from(h) != v {
-                        return Err(format!("anchor of vertex {vi} does not start at it"));
+                        return Err(TopologyError::AnchorElsewhere(vi));
                     }
                     let n = self.outgoing(v).count() as u32;
                     if n != count {
-                        return Err(format!(
-                            "vertex {vi} is non-manifold: fan has {n} of its {count} faces"
-                        ));
+                        return Err(TopologyError::NonManifoldVertex {
+                            vertex: vi,
+                            fan: n,
+                            faces: count,
+                        });
                     }
                 }
             }
@@ -566,7 +581,7 @@ impl Mesh {
         id
     }
     /// Appends faces over existing vertices (see [`Topology::add_faces`]).
-    pub fn add_faces(&mut self, faces: &[[VertexId; 3]]) -> Result<(), String> {
+    pub fn add_faces(&mut self, faces: &[[VertexId; 3]]) -> Result<(), TopologyError> {
         let n = self.positions.len();
         self.topo.add_faces(faces, n)
     }
@@ -594,24 +609,23 @@ impl Mesh {
         self.topo.anchor.truncate(n);
     }
     /// Checks topology invariants and that geometry arrays match it.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), TopologyError> {
         if self.positions.len() != self.topo.num_vertices() {
-            return Err(format!(
-                "{} positions for {} vertices",
-                self.positions.len(),
-                self.topo.num_vertices()
-            ));
+            return Err(TopologyError::PositionCount {
+                positions: self.positions.len(),
+                vertices: self.topo.num_vertices(),
+            });
         }
         if self.origin.len() != self.positions.len() {
-            return Err("origin array size".into());
+            return Err(TopologyError::OriginArraySize);
         }
         if let Some(c) = &self.colors {
             if c.len() != self.positions.len() {
-                return Err("colour array size".into());
+                return Err(TopologyError::ColourArraySize);
             }
         }
         if let Some(i) = self.positions.iter().position(|p| !p.is_finite()) {
-            return Err(format!("vertex {i} has a non-finite coordinate"));
+            return Err(TopologyError::NonFinite(i));
         }
         self.topo.validate()
     }
@@ -622,21 +636,8 @@ mod tests {
     use super::*;
     use crate::io::RawMesh;
 
-    pub(crate) fn grid(n: usize) -> RawMesh {
-        let mut raw = RawMesh::default();
-        for j in 0..=n {
-            for i in 0..=n {
-                raw.positions.push(DVec3::new(i as f64, j as f64, 0.0));
-            }
-        }
-        let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
-        for j in 0..n {
-            for i in 0..n {
-                raw.faces.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-                raw.faces.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-            }
-        }
-        raw
+    fn grid(n: usize) -> RawMesh {
+        crate::testutil::grid(n, 0.0, n as f64, |_, _| 0.0)
     }
 
     #[test]
@@ -738,16 +739,28 @@ mod tests {
         let rim = |i: usize| [hole[i], hole[(i + 1) % k], c];
         // the reverse of a rim edge: a directed edge the mesh already has
         let reversed = [hole[1], hole[0], c];
-        let cases: Vec<(Vec<[VertexId; 3]>, &str)> = vec![
-            (vec![rim(0), [hole[1], hole[1], c]], "repeats a vertex"),
-            (vec![rim(0), reversed], "used twice"),
-            (vec![rim(0), rim(1), rim(0)], "used twice"),
-            (vec![[hole[0], hole[1], VertexId(9999)]], "out of range"),
+        let cases: Vec<(Vec<[VertexId; 3]>, TopologyError)> = vec![
+            (
+                vec![rim(0), [hole[1], hole[1], c]],
+                TopologyError::NewFaceRepeatsVertex(1),
+            ),
+            (
+                vec![rim(0), reversed],
+                TopologyError::DirectedEdgeTaken(hole[1], hole[0]),
+            ),
+            (
+                vec![rim(0), rim(1), rim(0)],
+                TopologyError::DirectedEdgeTaken(hole[0], hole[1]),
+            ),
+            (
+                vec![[hole[0], hole[1], VertexId(9999)]],
+                TopologyError::VertexOutOfRange(VertexId(9999)),
+            ),
         ];
-        for (batch, what) in cases {
+        for (batch, want) in cases {
             let mut t = m.clone();
             let e = t.add_faces(&batch).unwrap_err();
-            assert!(e.contains(what), "{e}: expected {what}");
+            assert_eq!(e, want);
             assert_eq!(t.topo.faces(), m.topo.faces());
             assert_eq!(t.topo.boundary_loops(), m.topo.boundary_loops());
             t.validate().unwrap();
@@ -772,7 +785,7 @@ mod tests {
         let w = t.add_vertex(DVec3::new(9.0, 9.0, 1.0), None);
         for face in [[v, u, w], [u, v, w]] {
             let e = t.add_faces(&[face]).unwrap_err();
-            assert!(e.contains("used twice"), "{e}");
+            assert_eq!(e, TopologyError::DirectedEdgeTaken(face[0], face[1]));
             assert_eq!(t.topo.faces(), m.topo.faces());
         }
         t.validate().unwrap();

@@ -27,7 +27,7 @@ pub enum RepairError {
     Empty,
     /// The input's topology could not be resolved into a valid mesh.
     #[error("the mesh topology could not be resolved: {0}")]
-    Topology(String),
+    Topology(#[from] crate::mesh::TopologyError),
 }
 
 /// Repairs a triangle soup: builds the mesh, cleans the boundary, smooths if the
@@ -41,19 +41,19 @@ pub fn repair(raw: &RawMesh, policy: &Policy) -> Result<(RawMesh, RepairReport),
     if mesh.num_faces() == 0 {
         return Err(RepairError::Empty);
     }
-    mesh.validate().map_err(RepairError::Topology)?;
+    mesh.validate()?;
     report.before = counts(&mesh);
 
     if policy.clean.remove_teeth {
         let (m, removed) = remove_teeth(mesh);
         mesh = m;
         report.resolved.tooth_faces_removed = removed;
-        mesh.validate().map_err(RepairError::Topology)?;
+        mesh.validate()?;
     }
     if policy.clean.split_long_edges > 0.0 {
         report.resolved.long_edges_split =
             split_long_edges(&mut mesh, policy.clean.split_long_edges);
-        mesh.validate().map_err(RepairError::Topology)?;
+        mesh.validate()?;
     }
 
     if policy.smooth.enabled {
@@ -67,7 +67,11 @@ pub fn repair(raw: &RawMesh, policy: &Policy) -> Result<(RawMesh, RepairReport),
     report.timings.fill_ms = t.elapsed().as_secs_f64() * 1000.0;
     report.after = counts(&mesh);
     report.summarise();
-    Ok((mesh.to_raw(raw), report))
+    let t = Instant::now();
+    let (out, attributes) = crate::mesh::attributes::carry(&mesh, raw);
+    report.attributes = attributes;
+    report.timings.attributes_ms = t.elapsed().as_secs_f64() * 1000.0;
+    Ok((out, report))
 }
 
 fn counts(mesh: &Mesh) -> Counts {

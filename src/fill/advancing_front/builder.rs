@@ -20,31 +20,6 @@ pub(super) struct Node {
     pub(super) behind: DVec3,
 }
 
-/// A heap entry (min-heap on `key`).
-#[derive(Clone, Copy, Debug)]
-pub(super) struct Entry {
-    pub(super) key: f64,
-    pub(super) node: u32,
-    pub(super) version: u32,
-}
-
-impl PartialEq for Entry {
-    fn eq(&self, o: &Self) -> bool {
-        self.cmp(o) == Ordering::Equal
-    }
-}
-impl Eq for Entry {}
-impl PartialOrd for Entry {
-    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
-        Some(self.cmp(o))
-    }
-}
-impl Ord for Entry {
-    fn cmp(&self, o: &Self) -> Ordering {
-        o.key.total_cmp(&self.key).then(o.node.cmp(&self.node))
-    }
-}
-
 /// The local frame at a front vertex.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Eval {
@@ -93,7 +68,7 @@ pub(super) struct Builder<'a> {
     pub(super) nodes: Vec<Node>,
     pub(super) front_size: Vec<usize>,
     pub(super) alive: usize,
-    pub(super) heap: BinaryHeap<Entry>,
+    pub(super) heap: FrontQueue,
     pub(super) node_grid: Grid,
     pub(super) node_scratch: Vec<u32>,
     pub(super) mesh_tris: Vec<[DVec3; 3]>,
@@ -102,11 +77,6 @@ pub(super) struct Builder<'a> {
     pub(super) steps: usize,
     pub(super) applied: usize,
     pub(super) set_aside: usize,
-}
-
-#[inline]
-pub(super) fn ekey(a: u32, b: u32) -> (u32, u32) {
-    (a.min(b), a.max(b))
 }
 
 impl<'a> Builder<'a> {
@@ -158,7 +128,7 @@ impl<'a> Builder<'a> {
                 if let Some(&j) = index.get(&w) {
                     let j = j as usize;
                     if j != (i + 1) % k && i != (j + 1) % k && i != j {
-                        forbidden.insert(ekey(i as u32, j as u32));
+                        forbidden.insert(edge_key(i as u32, j as u32));
                     }
                 }
             }
@@ -166,7 +136,7 @@ impl<'a> Builder<'a> {
         let mut edges = FxSet::default();
         edges.reserve(k * 8);
         for i in 0..k {
-            edges.insert(ekey(i as u32, ((i + 1) % k) as u32));
+            edges.insert(edge_key(i as u32, ((i + 1) % k) as u32));
         }
         // the mesh face behind each loop edge i -> i+1 holds the half-edge i+1 -> i
         let mut nodes = Vec::with_capacity(k * 4);
@@ -258,7 +228,7 @@ impl<'a> Builder<'a> {
             nodes,
             front_size: vec![k],
             alive: k,
-            heap: BinaryHeap::new(),
+            heap: FrontQueue::new(),
             node_grid,
             node_scratch: Vec::new(),
             mesh_tris,
@@ -296,7 +266,7 @@ impl<'a> Builder<'a> {
             self.acc[v as usize] += nr;
         }
         for c in 0..3 {
-            self.edges.insert(ekey(t[c], t[(c + 1) % 3]));
+            self.edges.insert(edge_key(t[c], t[(c + 1) % 3]));
         }
         self.obstacles.add([a, b, c]);
         self.tris.push(t);
@@ -400,10 +370,10 @@ impl<'a> Builder<'a> {
                 for d in 0..2 {
                     let (a, b, c, e) = (vs[d], vs[d + 1], vs[(d + 2) % 4], vs[(d + 3) % 4]);
                     let pair = [[a, b, c], [c, e, a]];
-                    if self.edges.contains(&ekey(a, c))
+                    if self.edges.contains(&edge_key(a, c))
                         || ((a as usize) < self.k
                             && (c as usize) < self.k
-                            && self.forbidden.contains(&ekey(a, c)))
+                            && self.forbidden.contains(&edge_key(a, c)))
                     {
                         continue;
                     }
@@ -511,6 +481,7 @@ impl<'a> Builder<'a> {
             key: ev.theta,
             node: x,
             version: nd.version,
+            data: (),
         });
     }
 
@@ -571,6 +542,7 @@ impl<'a> Builder<'a> {
                             key: ev.theta,
                             node: e.node,
                             version: nd.version,
+                            data: (),
                         });
                         continue;
                     }
@@ -596,6 +568,7 @@ impl<'a> Builder<'a> {
                         key: ev.theta + BLOCKED,
                         node: e.node,
                         version: nd.version,
+                        data: (),
                     });
                 }
             }
@@ -649,7 +622,7 @@ impl<'a> Builder<'a> {
         let mut candidates: Vec<(Vec<DVec3>, Vec<[u32; 3]>)> = Vec::new();
         if self.p.fair {
             // umbrella relaxation evens out the triangles, then the fairing solve
-            // (`fill::fair`, the `[fair]` policy) gives the patch its shape
+            // (`fill::kit::fair`, the `[fair]` policy) gives the patch its shape
             let mut patch = Patch {
                 new_vertices: self.pos[k..].to_vec(),
                 triangles: tris.clone(),

@@ -1,6 +1,6 @@
 //! Post-processing of the closed front: an angle-improving edge-swap pass inside the
 //! patch and a simple umbrella relaxation of the new vertices (the local stand-in for
-//! the patch fairing of `fill::fair`).
+//! the patch fairing of `fill::kit::fair`).
 
 use crate::fasthash::{FxMap, FxSet};
 use crate::geometry::measure;

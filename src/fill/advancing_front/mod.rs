@@ -1,7 +1,7 @@
 //! Improved advancing front for large holes.
 //!
 //! Paper 002 (Feng et al. 2020), §5.3 and Algorithm 3, with the closing rules of
-//! ALGORITHMS.md B3 step 5 (the paper is silent on them).
+//! ALGORITHMS B3 step 5 (docs/references.md) (the paper is silent on them).
 //!
 //! The front starts as the hole loop. While a front has more than four vertices, the
 //! front vertex with the smallest angle `θ` is processed: `θ <= angle_small` closes it
@@ -79,7 +79,7 @@
 //! After closing: an angle-improving edge-swap pass (max-min angle, never onto an
 //! existing edge, never folding a pair), then with `front.fair` the new vertices are
 //! relaxed (a few umbrella-smoothing iterations, the loop fixed, which evens out the
-//! triangles), then faired by `fill::fair::fair_patch` (the `[fair]` policy: the
+//! triangles), then faired by `fill::kit::fair::fair_patch` (the `[fair]` policy: the
 //! bi-Laplacian by default), which restores the curvature the raw front flattens,
 //! and the swap pass runs again.
 //! The whole patch is verified against itself and the mesh at the end; a faired
@@ -99,6 +99,7 @@ mod step;
 #[cfg(test)]
 mod tests;
 
+use super::kit::front::{edge_key, Entry, FrontQueue};
 use super::kit::{fair, FillContext, FillError, TooLarge};
 use crate::fasthash::FxSet;
 use crate::fasthash::HashMap;
@@ -108,8 +109,6 @@ use crate::patch::Patch;
 use builder::Builder;
 use glam::DVec3;
 use intersect::{Grid, Obstacles};
-use std::cmp::Ordering;
-use std::collections::BinaryHeap;
 use std::f64::consts::PI;
 
 /// Smallest angle (degrees) a step may create (at least the checks' minimum).

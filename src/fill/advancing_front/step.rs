@@ -233,12 +233,12 @@ impl Builder<'_> {
             if consumed.contains(&(a, b)) {
                 continue;
             }
-            if self.edges.contains(&ekey(a, b)) {
+            if self.edges.contains(&edge_key(a, b)) {
                 return None;
             }
             if (a as usize) < self.k
                 && (b as usize) < self.k
-                && self.forbidden.contains(&ekey(a, b))
+                && self.forbidden.contains(&edge_key(a, b))
             {
                 return None;
             }

@@ -11,6 +11,7 @@ use crate::io::RawMesh;
 use crate::mesh::Mesh;
 use crate::patch::{apply_patch, Hole};
 use crate::policy::{Checks, Policy, Settings};
+use crate::testutil::{self, cylinder_with_hole};
 use glam::{DVec2, DVec3};
 use proptest::prelude::*;
 use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
@@ -122,116 +123,24 @@ fn resample(corners: &[DVec2], h: f64) -> Vec<DVec2> {
 /// A grid of `n x n` unit cells (z = 0) with every face whose centroid satisfies
 /// `cut` removed.
 fn grid_with_hole(n: usize, cut: impl Fn(DVec3) -> bool) -> (Mesh, Vec<VertexId>) {
-    let mut raw = RawMesh::default();
-    for j in 0..=n {
-        for i in 0..=n {
-            raw.positions.push(DVec3::new(i as f64, j as f64, 0.0));
-        }
-    }
-    let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
-    for j in 0..n {
-        for i in 0..n {
-            for f in [
-                [id(i, j), id(i + 1, j), id(i + 1, j + 1)],
-                [id(i, j), id(i + 1, j + 1), id(i, j + 1)],
-            ] {
-                let c = f.iter().map(|&v| raw.positions[v as usize]).sum::<DVec3>() / 3.0;
-                if !cut(c) {
-                    raw.faces.push(f);
-                }
-            }
-        }
-    }
-    let (mesh, _) = Mesh::from_raw(&raw);
-    mesh.validate().unwrap();
-    let border = 4 * n;
-    let lp = mesh
-        .topo
-        .boundary_loops()
-        .into_iter()
-        .find(|l| l.len() != border)
-        .unwrap();
-    (mesh, lp)
+    let raw = testutil::cut_faces(testutil::grid(n, 0.0, n as f64, |_, _| 0.0), cut);
+    testutil::mesh_and_loop(&raw, |_, l| l.len() != 4 * n)
 }
 
 /// Unit icosphere (`level` subdivisions) with the faces whose centroid lies within
 /// `cap` radians of +z removed.
 fn sphere_with_hole(level: usize, cap: f64) -> (Mesh, Vec<VertexId>) {
-    let raw = crate::testutil::sphere_cap_removed(level, 1.0, DVec3::Z, cap);
-    let (mesh, _) = Mesh::from_raw(&raw);
-    mesh.validate().unwrap();
-    let loops = mesh.topo.boundary_loops();
-    assert_eq!(loops.len(), 1);
-    (mesh, loops.into_iter().next().unwrap())
-}
-
-/// Cylinder of radius 1 around the z axis (`seg` segments, rings `dz` apart,
-/// `rings` rings) with the faces whose centroid has |angle| < `half_angle` and
-/// |z - zc| < `half_height` removed.
-fn cylinder_with_hole(
-    seg: usize,
-    rings: usize,
-    half_angle: f64,
-    half_height: f64,
-) -> (Mesh, Vec<VertexId>) {
-    let dz = 2.0 * PI / seg as f64 * 0.866;
-    let mut raw = RawMesh::default();
-    for r in 0..rings {
-        for s in 0..seg {
-            let a = (s as f64 + 0.5 * (r % 2) as f64) * 2.0 * PI / seg as f64;
-            raw.positions
-                .push(DVec3::new(a.cos(), a.sin(), r as f64 * dz));
-        }
-    }
-    let id = |r: usize, s: usize| (r * seg + s % seg) as u32;
-    let zc = (rings - 1) as f64 * dz * 0.5;
-    for r in 0..rings - 1 {
-        for s in 0..seg {
-            let fs = if r % 2 == 0 {
-                [
-                    [id(r, s), id(r, s + 1), id(r + 1, s)],
-                    [id(r, s + 1), id(r + 1, s + 1), id(r + 1, s)],
-                ]
-            } else {
-                [
-                    [id(r, s), id(r + 1, s + 1), id(r + 1, s)],
-                    [id(r, s), id(r, s + 1), id(r + 1, s + 1)],
-                ]
-            };
-            for f in fs {
-                let c = f.iter().map(|&v| raw.positions[v as usize]).sum::<DVec3>() / 3.0;
-                let ang = c.y.atan2(c.x);
-                if ang.abs() < half_angle && (c.z - zc).abs() < half_height {
-                    continue;
-                }
-                raw.faces.push(f);
-            }
-        }
-    }
-    let (mesh, _) = Mesh::from_raw(&raw);
-    mesh.validate().unwrap();
-    let lp = mesh
-        .topo
-        .boundary_loops()
-        .into_iter()
-        .find(|l| l.len() != seg)
-        .unwrap();
+    let raw = testutil::sphere_cap_removed(level, 1.0, DVec3::Z, cap);
+    let (mesh, lp) = testutil::mesh_and_loop(&raw, |_, _| true);
+    assert_eq!(mesh.topo.boundary_loops().len(), 1);
     (mesh, lp)
 }
+
 
 // ----- running and checking ---------------------------------------------------------
 
 fn run(mesh: &Mesh, lp: &[VertexId], policy: &Policy) -> (Hole, Result<Patch, FillError>) {
-    let hole = Hole::new(0, mesh, lp.to_vec(), policy);
-    let ctx = FillContext {
-        mesh,
-        hole: &hole,
-        policy,
-        deadline: Deadline::none(),
-        checker: None,
-    };
-    let r = fill(&ctx);
-    (hole, r)
+    crate::fill::kit::run_on(mesh, lp.to_vec(), policy, fill)
 }
 
 struct Stats {
@@ -425,28 +334,6 @@ fn never_duplicates_a_mesh_edge_between_loop_vertices() {
         })
     };
     assert!(has(1, 3) && !has(0, 2), "{ids:?}");
-}
-
-/// Through the dispatcher: a large hole goes to the advancing front, whose patch
-/// passes the checks and is applied.
-#[test]
-fn dispatcher_fills_a_large_hole_with_the_front() {
-    use crate::check::Checker;
-    use crate::policy::Method;
-    use crate::report::HoleStatus;
-    let (mut mesh, lp) = grid_with_hole(30, |c| (c - DVec3::new(15.0, 15.0, 0.0)).length() < 9.0);
-    // paper 002's list for large holes (the default puts wavefront first)
-    let mut policy = Policy::default();
-    policy = policy
-        .edit(|s| s.dispatch.large = vec![Method::AdvancingFront, Method::MinAreaFair])
-        .unwrap();
-    let hole = Hole::new(0, &mesh, lp, &policy);
-    let mut checker = Checker::new(&mesh);
-    let rep = crate::fill::dispatch::fill_hole(&mut mesh, &hole, &policy, &mut checker);
-    assert_eq!(rep.status, HoleStatus::Filled, "{}", rep.reason);
-    assert_eq!(rep.method, Some(Method::AdvancingFront));
-    mesh.validate().unwrap();
-    assert_eq!(mesh.topo.boundary_loops().len(), 1);
 }
 
 // ----- curved -----------------------------------------------------------------------

@@ -261,7 +261,7 @@ pub fn finish_hole(
             Err(why) => rep.tried.push(Attempt {
                 method,
                 outcome: Outcome::Rejected,
-                reason: why,
+                reason: why.to_string(),
                 ms,
             }),
         }
@@ -295,3 +295,6 @@ pub fn fill_hole(
 fn ms_since(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1000.0
 }
+
+#[cfg(test)]
+mod tests;

@@ -1,6 +1,7 @@
 //! Step 7 of HPDE: smoothing, short-edge collapse and angle-improving swaps of the
 //! patch (paper 000 §4.6–§4.7, Fig. 5). Boundary vertices (index `< k`) never move.
 
+use crate::fill::kit::front::edge_key;
 use crate::fill::kit::FillError;
 use crate::geometry::measure;
 use crate::patch::Patch;
@@ -16,10 +17,6 @@ pub struct Local {
     alive_t: Vec<bool>,
     /// Loop-index pairs `(i < j)` that are existing mesh edges (not loop edges).
     chords: BTreeSet<(u32, u32)>,
-}
-
-fn ukey(a: u32, b: u32) -> (u32, u32) {
-    (a.min(b), a.max(b))
 }
 
 impl Local {
@@ -99,7 +96,7 @@ impl Local {
         if self.is_new(a) || self.is_new(b) {
             return true;
         }
-        !self.chords.contains(&ukey(a, b))
+        !self.chords.contains(&edge_key(a, b))
     }
 
     /// Collapses edges shorter than `min_len`, shortest first: two new vertices meet
@@ -253,7 +250,7 @@ impl Local {
             let mut touched = vec![false; self.tris.len()];
             let keys: Vec<(u32, u32)> = de.keys().copied().collect();
             // undirected edges, kept current as swaps happen
-            let mut edges: BTreeSet<(u32, u32)> = keys.iter().map(|&(a, b)| ukey(a, b)).collect();
+            let mut edges: BTreeSet<(u32, u32)> = keys.iter().map(|&(a, b)| edge_key(a, b)).collect();
             for (a, b) in keys {
                 if a > b {
                     continue;
@@ -269,7 +266,7 @@ impl Local {
                 let (Some(c), Some(d)) = (c, d) else {
                     continue;
                 };
-                if c == d || edges.contains(&ukey(c, d)) {
+                if c == d || edges.contains(&edge_key(c, d)) {
                     continue;
                 }
                 if !self.edge_allowed(c, d) {
@@ -291,8 +288,8 @@ impl Local {
                 }
                 self.tris[t1 as usize] = [a, d, c];
                 self.tris[t2 as usize] = [d, b, c];
-                edges.remove(&ukey(a, b));
-                edges.insert(ukey(c, d));
+                edges.remove(&edge_key(a, b));
+                edges.insert(edge_key(c, d));
                 touched[t1 as usize] = true;
                 touched[t2 as usize] = true;
                 changed = true;

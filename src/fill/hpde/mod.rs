@@ -1,6 +1,6 @@
 //! HPDE: hole patching by point prediction with differential evolution (paper 000,
 //! "A triangulation-based hole patching method using differential evolution", §4;
-//! ALGORITHMS.md section D).
+//! ALGORITHMS D in docs/references.md).
 //!
 //! Steps, in the paper's order (§4.1–§4.7), and how this module reads each one:
 //!
@@ -86,12 +86,11 @@
 //!    flips a triangle, or breaks the link condition. (The collapse rate has no value
 //!    in the paper; 0.6 measured best of 0.5–0.8 on the tests' surfaces.)
 //!
-//! 8. *Self-checked variants* (not in the paper; [`super::wavefront::retry`]): when the
+//! 8. *Self-checked variants* (not in the paper; [`crate::fill::kit::retry`]): when the
 //!    patch fails the dispatcher's checks (a CDT triangle jumping across a fold of the
 //!    loop, a collapse pulling a vertex over one), a local repair is tried (edge flips,
 //!    then minimum-area re-triangulation in 3-D of the region around the failing
-//!    triangle), then the variants of [`variants`]. On the shared bench this closes
-//!    every hole (before: homer hole 3 and cheburashka hole 5 self-intersected).
+//!    triangle), then the variants of [`variants`].
 //!
 //! The noise experiment (§5) uses uniform noise in `[−σ, σ]`; our test uses seeded
 //! Gaussian noise (the wording), without the pre-smoothing.
@@ -115,7 +114,7 @@ use std::collections::BTreeSet;
 
 /// Fills the hole with HPDE (see the module documentation): the policy's settings
 /// first; when their patch fails the checks (after a local repair by edge flips), the
-/// variants of [`variants`] (see [`super::wavefront::retry`]).
+/// variants of [`variants`] (see [`crate::fill::kit::retry`]).
 pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
     fill_checked(ctx).map(|(p, _)| p)
 }

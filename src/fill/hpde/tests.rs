@@ -8,6 +8,7 @@ use crate::io::RawMesh;
 use crate::mesh::Mesh;
 use crate::patch::{apply_patch, Hole};
 use crate::policy::{Checks, Policy};
+use crate::testutil::{self, cylinder_with_hole};
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 use std::f64::consts::PI;
@@ -17,15 +18,7 @@ use std::f64::consts::PI;
 /// Builds a mesh from raw data and returns it with the loop that is not the outer
 /// border (the loop for which `pick` is true).
 fn build(raw: &RawMesh, pick: impl Fn(&[VertexId]) -> bool) -> (Mesh, Vec<VertexId>) {
-    let (mesh, _) = Mesh::from_raw(raw);
-    mesh.validate().unwrap();
-    let lp = mesh
-        .topo
-        .boundary_loops()
-        .into_iter()
-        .find(|l| pick(l))
-        .unwrap();
-    (mesh, lp)
+    testutil::mesh_and_loop(raw, |_, l| pick(l))
 }
 
 /// A grid of `n x n` cells of size `h` centred on the origin, heights `z(x, y)`, with
@@ -73,139 +66,14 @@ fn height_grid(
 /// Unit icosphere (`level` subdivisions) with the faces whose centroid direction lies
 /// within `cap` radians of +z removed.
 fn icosphere_with_hole(level: usize, cap: f64) -> (Mesh, Vec<VertexId>) {
-    let t = (1.0 + 5f64.sqrt()) / 2.0;
-    let mut pos: Vec<DVec3> = [
-        [-1.0, t, 0.0],
-        [1.0, t, 0.0],
-        [-1.0, -t, 0.0],
-        [1.0, -t, 0.0],
-        [0.0, -1.0, t],
-        [0.0, 1.0, t],
-        [0.0, -1.0, -t],
-        [0.0, 1.0, -t],
-        [t, 0.0, -1.0],
-        [t, 0.0, 1.0],
-        [-t, 0.0, -1.0],
-        [-t, 0.0, 1.0],
-    ]
-    .iter()
-    .map(|p| DVec3::from(*p).normalize())
-    .collect();
-    let mut faces: Vec<[u32; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    for _ in 0..level {
-        let mut mid: std::collections::BTreeMap<(u32, u32), u32> = Default::default();
-        let mut next = Vec::with_capacity(faces.len() * 4);
-        let mut m = |a: u32, b: u32, pos: &mut Vec<DVec3>| {
-            *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                pos.push(((pos[a as usize] + pos[b as usize]) * 0.5).normalize());
-                (pos.len() - 1) as u32
-            })
-        };
-        for f in &faces {
-            let ab = m(f[0], f[1], &mut pos);
-            let bc = m(f[1], f[2], &mut pos);
-            let ca = m(f[2], f[0], &mut pos);
-            next.extend_from_slice(&[[f[0], ab, ca], [f[1], bc, ab], [f[2], ca, bc], [ab, bc, ca]]);
-        }
-        faces = next;
-    }
-    let raw = RawMesh {
-        faces: faces
-            .into_iter()
-            .filter(|f| {
-                let c = f
-                    .iter()
-                    .map(|&v| pos[v as usize])
-                    .sum::<DVec3>()
-                    .normalize();
-                c.z < cap.cos()
-            })
-            .collect(),
-        positions: pos,
-        ..Default::default()
-    };
-    build(&raw, |_| true)
+    build(&testutil::sphere_cap_removed(level, 1.0, DVec3::Z, cap), |_| true)
 }
 
-/// Cylinder of radius 1 around the z axis with a hole on its side: faces whose
-/// centroid has |angle| < `half_angle` and |z - zc| < `half_height` removed.
-fn cylinder_with_hole(
-    seg: usize,
-    rings: usize,
-    half_angle: f64,
-    half_height: f64,
-) -> (Mesh, Vec<VertexId>) {
-    let dz = 2.0 * PI / seg as f64 * 0.866;
-    let mut raw = RawMesh::default();
-    for r in 0..rings {
-        for s in 0..seg {
-            let a = (s as f64 + 0.5 * (r % 2) as f64) * 2.0 * PI / seg as f64;
-            raw.positions
-                .push(DVec3::new(a.cos(), a.sin(), r as f64 * dz));
-        }
-    }
-    let id = |r: usize, s: usize| (r * seg + s % seg) as u32;
-    let zc = (rings - 1) as f64 * dz * 0.5;
-    for r in 0..rings - 1 {
-        for s in 0..seg {
-            let fs = if r % 2 == 0 {
-                [
-                    [id(r, s), id(r, s + 1), id(r + 1, s)],
-                    [id(r, s + 1), id(r + 1, s + 1), id(r + 1, s)],
-                ]
-            } else {
-                [
-                    [id(r, s), id(r + 1, s + 1), id(r + 1, s)],
-                    [id(r, s), id(r, s + 1), id(r + 1, s + 1)],
-                ]
-            };
-            for f in fs {
-                let c = f.iter().map(|&v| raw.positions[v as usize]).sum::<DVec3>() / 3.0;
-                let ang = c.y.atan2(c.x);
-                if ang.abs() < half_angle && (c.z - zc).abs() < half_height {
-                    continue;
-                }
-                raw.faces.push(f);
-            }
-        }
-    }
-    build(&raw, |l| l.len() != seg)
-}
 
 // ----- running and checking ---------------------------------------------------------
 
 fn run(mesh: &Mesh, lp: &[VertexId], policy: &Policy) -> (Hole, Result<Patch, FillError>) {
-    let hole = Hole::new(0, mesh, lp.to_vec(), policy);
-    let ctx = FillContext {
-        mesh,
-        hole: &hole,
-        policy,
-        deadline: Deadline::none(),
-        checker: None,
-    };
-    let r = fill(&ctx);
-    (hole, r)
+    crate::fill::kit::run_on(mesh, lp.to_vec(), policy, fill)
 }
 
 /// The patch passes the dispatcher's topology and degeneracy checks and applies to a
@@ -425,40 +293,6 @@ fn expired_deadline_times_out() {
         checker: None,
     };
     assert_eq!(fill(&ctx), Err(FillError::Timeout));
-}
-
-/// Forced by the policy for every class, HPDE's patches pass the dispatcher's full
-/// checks (including self-intersection against the mesh) and are applied as HPDE's.
-#[test]
-fn dispatcher_accepts_hpde_patches() {
-    use crate::check::Checker;
-    use crate::fill::dispatch::fill_hole;
-    use crate::policy::Method;
-    use crate::report::HoleStatus;
-    let mut policy = Policy::default();
-    policy = policy
-        .edit(|s| s.dispatch.small = vec![Method::Hpde])
-        .unwrap();
-    policy = policy
-        .edit(|s| s.dispatch.middle = vec![Method::Hpde])
-        .unwrap();
-    policy = policy
-        .edit(|s| s.dispatch.large = vec![Method::Hpde])
-        .unwrap();
-    for (mut mesh, lp) in [
-        icosphere_with_hole(3, 0.75),
-        icosphere_with_hole(4, 1.1),
-        cylinder_with_hole(48, 30, 0.7, 1.2),
-    ] {
-        let loops = mesh.topo.boundary_loops().len();
-        let hole = Hole::new(0, &mesh, lp, &policy);
-        let mut chk = Checker::new(&mesh);
-        let rep = fill_hole(&mut mesh, &hole, &policy, &mut chk);
-        assert_eq!(rep.status, HoleStatus::Filled, "{:?}", rep.tried);
-        assert_eq!(rep.method, Some(Method::Hpde));
-        mesh.validate().unwrap();
-        assert_eq!(mesh.topo.boundary_loops().len(), loops - 1);
-    }
 }
 
 /// A hole across the ridge of a roof whose faces meet at 60 degrees: the segmentation

@@ -24,7 +24,7 @@
 //! * Normalisation: each Laplacian is divided by the vertex's mixed Voronoi area
 //!   (Meyer et al. 2003), i.e. the discrete Laplace-Beltrami operator. CGAL's `fair()`
 //!   does the same (`Cotangent_weight_with_voronoi_area_fairing`, weights
-//!   `w_i = 1/(2 A_i)`). On the bench's sphere and cylinder holes this gives a
+//!   `w_i = 1/(2 A_i)`). On sphere and cylinder holes this gives a
 //!   smaller error than the unnormalised operator for `c = 2` (see the tests), because
 //!   the patch triangles (small, refined) and the ring triangles (input size) differ.
 //!   For `uniform`/`fujiwara` weights the operator is normalised by the weight sum

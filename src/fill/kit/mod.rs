@@ -2,10 +2,12 @@
 //! error ([`FillError`]) and deadline, and the shared building blocks: minimum-area
 //! triangulation ([`triangulate`]), refinement ([`refine`]), the fairing solver
 //! ([`fair`]), tangential relaxation ([`relax`]), the closing of a residual front
-//! ([`residual`]) and the self-checked variants with their local repairs ([`retry`]).
+//! ([`residual`]), the self-checked variants with their local repairs ([`retry`]), and
+//! the queue and edge keys of the front engines ([`front`]).
 
 mod error;
 pub mod fair;
+pub mod front;
 pub mod refine;
 pub mod relax;
 pub mod residual;
@@ -72,6 +74,27 @@ impl FillContext<'_> {
             .map(|&v| self.mesh.pos(v))
             .collect()
     }
+}
+
+/// Runs `method` on the loop `lp` of `mesh` as hole 0, without deadline or checker
+/// (the methods' unit tests).
+#[cfg(test)]
+pub(crate) fn run_on(
+    mesh: &Mesh,
+    lp: Vec<crate::mesh::VertexId>,
+    policy: &Policy,
+    method: impl Fn(&FillContext) -> Result<crate::patch::Patch, FillError>,
+) -> (Hole, Result<crate::patch::Patch, FillError>) {
+    let hole = Hole::new(0, mesh, lp, policy);
+    let ctx = FillContext {
+        mesh,
+        hole: &hole,
+        policy,
+        deadline: Deadline::none(),
+        checker: None,
+    };
+    let r = method(&ctx);
+    (hole, r)
 }
 
 /// For methods without a coarsening of their own (`wavefront`, `hpde`,

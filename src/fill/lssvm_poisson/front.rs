@@ -43,7 +43,7 @@ pub fn initial_front(
 }
 
 /// [`initial_front`]; with `residual`, a stuck 3-D front closes its loop as a residual
-/// front ([`super::wavefront::residual`]) instead of the planar fallback.
+/// front ([`crate::fill::kit::residual`]) instead of the planar fallback.
 pub fn initial_front_with(
     mesh: &Mesh,
     hole: &[VertexId],
@@ -238,10 +238,6 @@ impl Obstacle {
     }
 }
 
-pub(super) fn ukey(a: u32, b: u32) -> (u32, u32) {
-    (a.min(b), a.max(b))
-}
-
 impl Front {
     /// The front of the loop `hole`; with `planar`, of its projection onto its best-fit
     /// plane (`None` when that is not a simple polygon).
@@ -276,10 +272,10 @@ impl Front {
         for (i, &v) in hole.iter().enumerate() {
             for w in mesh.topo.neighbors(v) {
                 if let Some(&j) = index.get(&w) {
-                    edges.insert(ukey(i as u32, j));
+                    edges.insert(edge_key(i as u32, j));
                 }
             }
-            edges.insert(ukey(i as u32, ((i + 1) % k) as u32));
+            edges.insert(edge_key(i as u32, ((i + 1) % k) as u32));
         }
         let mut obstacles = Vec::new();
         let mut seen = HashSet::default();
@@ -353,7 +349,7 @@ impl Front {
             );
             for c in 0..3 {
                 self.nacc[t[c] as usize] += n;
-                self.edges.insert(ukey(t[c], t[(c + 1) % 3]));
+                self.edges.insert(edge_key(t[c], t[(c + 1) % 3]));
             }
             self.tris.push(*t);
             self.obstacles
@@ -457,7 +453,7 @@ impl Front {
         let mut forbidden = HashSet::default();
         for i in 0..m {
             for j in i + 2..m {
-                if (i, j) != (0, m - 1) && self.edges.contains(&ukey(lp[i], lp[j])) {
+                if (i, j) != (0, m - 1) && self.edges.contains(&edge_key(lp[i], lp[j])) {
                     forbidden.insert((i as u32, j as u32));
                 }
             }
@@ -531,7 +527,7 @@ impl Front {
             if orient2(q[i0], q[j], q[i2]) <= 0.0 {
                 continue;
             }
-            if self.edges.contains(&ukey(lp[i0], lp[i2])) {
+            if self.edges.contains(&edge_key(lp[i0], lp[i2])) {
                 continue;
             }
             if (0..m).any(|t| {
@@ -635,7 +631,7 @@ impl Front {
                 if is_front_edge(a, b) {
                     continue;
                 }
-                if a < base && b < base && self.edges.contains(&ukey(a, b)) {
+                if a < base && b < base && self.edges.contains(&edge_key(a, b)) {
                     return None;
                 }
                 new_edges.push((a, b));

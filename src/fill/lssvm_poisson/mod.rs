@@ -1,7 +1,7 @@
 //! Feature-based hole filling: LS-SVM regression of the Laplacian + Poisson solve.
 //!
 //! Paper 003 (Xu, Li, Tan 2013, "Feature Based Hole Filling Algorithm on Triangular
-//! Mesh"); ALGORITHMS.md section E. Four steps; how each reads the paper:
+//! Mesh"); ALGORITHMS E (docs/references.md). Four steps; how each reads the paper:
 //!
 //! 1. **Initial patch** (§3.2): a plain advancing front with the angle rules of paper 002
 //!    §5.3 and none of its corrections. At the front vertex with the smallest angle θ
@@ -77,13 +77,12 @@
 //!
 //! Connectivity is the front's throughout; only the positions of new vertices change.
 //!
-//! **Self-checked variants** (not in the paper; [`super::wavefront::retry`]): when the
+//! **Self-checked variants** (not in the paper; [`crate::fill::kit::retry`]): when the
 //! patch fails the dispatcher's checks, a local repair (edge flips, then re-triangulation
 //! of the region around the failing triangle) is tried, then the same pipeline with the
 //! other initial patches of [`Start`] (the 3-D front closing a stuck loop as a residual
-//! front, [`super::wavefront::residual`]; the whole loop as one residual front) and a
-//! softer regression (`iterations = 1`, `gamma / 4`). On the shared bench (35 holes)
-//! this closes every hole; before, homer's folded hole 3 and a bunny hole failed.
+//! front, [`crate::fill::kit::residual`]; the whole loop as one residual front) and a
+//! softer regression (`iterations = 1`, `gamma / 4`).
 
 mod front;
 mod model;
@@ -92,11 +91,11 @@ mod poisson;
 #[cfg(test)]
 mod tests;
 
-use front::ukey;
 pub use front::{initial_front, initial_front_with};
 pub use model::{kernel_sigma, training_set, LssvmModel};
 pub use poisson::{solve_poisson, PoissonSolver, Ring};
 
+use super::kit::front::edge_key;
 use super::kit::{
     check_patch_size, residual, retry, triangulate, Deadline, FillContext, FillError, TooLarge,
 };
@@ -128,7 +127,7 @@ const FRONT_MIN_ANGLE_DEG: f64 = 2.0;
 const UNIFORM_WEIGHT: f64 = 1.154_700_538_379_251_5;
 
 /// Fills the hole: plain front, LS-SVM prediction of the Laplacian, Poisson solve.
-/// Self-checked variants (see [`super::wavefront::retry`]): first the front as the
+/// Self-checked variants (see [`crate::fill::kit::retry`]): first the front as the
 /// module doc says (3-D, else planar); when its patch fails the checks, the 3-D front
 /// that closes a stuck loop as a residual front; then both with `iterations = 1` and
 /// the prediction halved (`gamma` / 4, a smoother regression).
@@ -360,7 +359,7 @@ fn is_sound(boundary: &[DVec3], old: &[DVec3], new: &[DVec3], triangles: &[[u32;
         crate::fasthash::HashMap::default();
     for (ti, t) in triangles.iter().enumerate() {
         for c in 0..3 {
-            let key = ukey(t[c], t[(c + 1) % 3]);
+            let key = edge_key(t[c], t[(c + 1) % 3]);
             if let Some(&other) = by_edge.get(&key) {
                 if normals[ti].dot(normals[other]) < FOLD_DOT {
                     return false;

@@ -4,25 +4,21 @@ use crate::fill::kit::Deadline;
 use crate::io::RawMesh;
 use crate::patch::{apply_patch, Hole};
 use crate::policy::{Checks, Policy};
+use crate::testutil;
 use rand::{Rng, SeedableRng};
 
 /// Builds a mesh from a soup, removing every face that touches a vertex for which
 /// `cut` holds; returns the mesh and the hole loop nearest `centre`.
-fn cut_mesh(
-    pos: &[DVec3],
-    faces: &[[u32; 3]],
-    cut: impl Fn(DVec3) -> bool,
-    centre: DVec3,
-) -> (Mesh, Vec<VertexId>) {
-    let gone: Vec<bool> = pos.iter().map(|&p| cut(p)).collect();
+fn cut_mesh(raw: RawMesh, cut: impl Fn(DVec3) -> bool, centre: DVec3) -> (Mesh, Vec<VertexId>) {
+    let gone: Vec<bool> = raw.positions.iter().map(|&p| cut(p)).collect();
     let raw = RawMesh {
-        positions: pos.to_vec(),
-        faces: faces
+        faces: raw
+            .faces
             .iter()
             .copied()
             .filter(|f| !f.iter().any(|&i| gone[i as usize]))
             .collect(),
-        ..Default::default()
+        ..raw
     };
     let (mesh, _) = Mesh::from_raw(&raw);
     mesh.validate().unwrap();
@@ -43,55 +39,17 @@ fn cut_mesh(
     (mesh, lp)
 }
 
-fn grid(n: usize) -> (Vec<DVec3>, Vec<[u32; 3]>) {
-    let mut pos = Vec::new();
-    for j in 0..=n {
-        for i in 0..=n {
-            pos.push(DVec3::new(i as f64, j as f64, 0.0));
-        }
-    }
-    let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
-    let mut faces = Vec::new();
-    for j in 0..n {
-        for i in 0..n {
-            faces.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-            faces.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-        }
-    }
-    (pos, faces)
+/// A flat grid of `n x n` unit cells.
+fn grid(n: usize) -> RawMesh {
+    testutil::grid(n, 0.0, n as f64, |_, _| 0.0)
 }
 
-/// Icosphere of radius `r`, `subdiv` midpoint subdivisions.
-fn icosphere(subdiv: usize, r: f64) -> (Vec<DVec3>, Vec<[u32; 3]>) {
-    let m = crate::testutil::icosphere(subdiv, r);
-    (m.positions, m.faces)
-}
 
-/// Open cylinder of radius `r` about the z axis.
-fn cylinder(r: f64, around: usize, rows: usize) -> (Vec<DVec3>, Vec<[u32; 3]>) {
-    let dz = std::f64::consts::TAU * r / around as f64;
-    let mut pos = Vec::new();
-    for j in 0..=rows {
-        for i in 0..around {
-            // rows are staggered by half a step for near-equilateral triangles
-            let a = (i as f64 + 0.5 * (j % 2) as f64) * std::f64::consts::TAU / around as f64;
-            pos.push(DVec3::new(r * a.cos(), r * a.sin(), j as f64 * dz * 0.866));
-        }
-    }
-    let id = |i: usize, j: usize| (j * around + i % around) as u32;
-    let mut faces = Vec::new();
-    for j in 0..rows {
-        for i in 0..around {
-            if j % 2 == 0 {
-                faces.push([id(i, j), id(i + 1, j), id(i, j + 1)]);
-                faces.push([id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)]);
-            } else {
-                faces.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-                faces.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-            }
-        }
-    }
-    (pos, faces)
+/// Open unit cylinder about the z axis, `around` vertices a ring, `rows` rows of
+/// near-equilateral triangles.
+fn cylinder(around: usize, rows: usize) -> RawMesh {
+    let dz = std::f64::consts::TAU / around as f64 * 0.866;
+    testutil::cylinder(1.0, around, rows + 1, dz, 0.0, true)
 }
 
 struct Run {
@@ -100,11 +58,9 @@ struct Run {
     hole: Hole,
 }
 
+/// Fills, and checks that the patch keeps the initial front's triangles, passes the
+/// topology and degeneracy checks and applies to a valid mesh.
 fn run(mesh: &Mesh, lp: &[VertexId], policy: &Policy) -> Run {
-    try_run(mesh, lp, policy).unwrap()
-}
-
-fn try_run(mesh: &Mesh, lp: &[VertexId], policy: &Policy) -> Result<Run, String> {
     let hole = Hole::new(0, mesh, lp.to_vec(), policy);
     let ctx = FillContext {
         mesh,
@@ -113,7 +69,7 @@ fn try_run(mesh: &Mesh, lp: &[VertexId], policy: &Policy) -> Result<Run, String>
         deadline: Deadline::none(),
         checker: None,
     };
-    let patch = fill(&ctx).map_err(|e| e.to_string())?;
+    let patch = fill(&ctx).unwrap();
     let front = initial_front(
         mesh,
         lp,
@@ -121,16 +77,15 @@ fn try_run(mesh: &Mesh, lp: &[VertexId], policy: &Policy) -> Result<Run, String>
         policy.lssvm.merge_distance,
         &Deadline::none(),
     )
-    .map_err(|e| e.to_string())?;
+    .unwrap();
     assert_eq!(front.triangles, patch.triangles);
-    // the patch passes the checks and applies to a valid mesh
-    check_topology(mesh, lp, &patch).map_err(|e| e.to_string())?;
+    check_topology(mesh, lp, &patch).unwrap();
     let pos = patch_positions(mesh, lp, &patch);
-    check_degenerate(&pos, &patch, &Checks::default()).map_err(|e| e.to_string())?;
+    check_degenerate(&pos, &patch, &Checks::default()).unwrap();
     let mut m2 = mesh.clone();
-    apply_patch(&mut m2, &hole, &patch)?;
-    m2.validate()?;
-    Ok(Run { patch, front, hole })
+    apply_patch(&mut m2, &hole, &patch).unwrap();
+    m2.validate().unwrap();
+    Run { patch, front, hole }
 }
 
 fn mean_max(v: impl Iterator<Item = f64>) -> (f64, f64) {
@@ -145,9 +100,9 @@ fn mean_max(v: impl Iterator<Item = f64>) -> (f64, f64) {
 
 #[test]
 fn planar_hole_gives_planar_patch() {
-    let (pos, faces) = grid(24);
+    let raw = grid(24);
     let c = DVec3::new(12.3, 11.8, 0.0);
-    let (mesh, lp) = cut_mesh(&pos, &faces, |p| (p - c).length() < 5.0, c);
+    let (mesh, lp) = cut_mesh(raw, |p| (p - c).length() < 5.0, c);
     let r = run(&mesh, &lp, &Policy::default());
     assert!(!r.patch.new_vertices.is_empty());
     for p in &r.patch.new_vertices {
@@ -157,9 +112,9 @@ fn planar_hole_gives_planar_patch() {
 }
 
 fn sphere_case(subdiv: usize, cap: f64) -> (Mesh, Vec<VertexId>) {
-    let (pos, faces) = icosphere(subdiv, 1.0);
+    let raw = testutil::icosphere(subdiv, 1.0);
     let dir = DVec3::new(0.3, 0.2, 1.0).normalize();
-    cut_mesh(&pos, &faces, |p| p.normalize().dot(dir) > cap.cos(), dir)
+    cut_mesh(raw, |p| p.normalize().dot(dir) > cap.cos(), dir)
 }
 
 fn sphere_errors(r: &Run) -> ((f64, f64), (f64, f64)) {
@@ -214,9 +169,9 @@ fn sphere_hole_100() {
 
 #[test]
 fn cylinder_hole() {
-    let (pos, faces) = cylinder(1.0, 64, 40);
+    let raw = cylinder(64, 40);
     let c = DVec3::new(1.0, 0.05, 1.7);
-    let (mesh, lp) = cut_mesh(&pos, &faces, |p| (p - c).length() < 0.45, c);
+    let (mesh, lp) = cut_mesh(raw, |p| (p - c).length() < 0.45, c);
     let r = run(&mesh, &lp, &Policy::default());
     let l = r.hole.mean_edge_length;
     let rad = |p: &DVec3| ((p.x * p.x + p.y * p.y).sqrt() - 1.0).abs() / l;
@@ -289,9 +244,9 @@ fn same_input_same_bits() {
 fn poisson_has_linear_precision_and_reuses_its_factorisation() {
     // on a plane the cotangent Laplacian of the positions is zero: solving for a zero
     // target on the true geometry must give it back, with and without the ring rows
-    let (pos, faces) = grid(16);
+    let raw = grid(16);
     let c = DVec3::new(8.2, 7.9, 0.0);
-    let (mesh, lp) = cut_mesh(&pos, &faces, |p| (p - c).length() < 3.5, c);
+    let (mesh, lp) = cut_mesh(raw, |p| (p - c).length() < 3.5, c);
     let r = run(&mesh, &lp, &Policy::default());
     let k = lp.len();
     let boundary: Vec<DVec3> = lp.iter().map(|&v| mesh.pos(v)).collect();
@@ -342,26 +297,15 @@ fn lssvm_reproduces_a_smooth_field() {
 #[test]
 fn small_loops_close() {
     // one removed grid cell (4 vertices, no new vertex needed) and a removed vertex star
-    let (pos, faces) = grid(6);
+    let full = grid(6);
     let cell = 2 * (2 * 6 + 2);
-    let mut f1 = faces.clone();
-    f1.drain(cell..cell + 2);
-    let raw = RawMesh {
-        positions: pos.clone(),
-        faces: f1,
-        ..Default::default()
-    };
-    let (mesh, _) = Mesh::from_raw(&raw);
-    let lp = mesh
-        .topo
-        .boundary_loops()
-        .into_iter()
-        .find(|l| l.len() == 4)
-        .unwrap();
+    let mut raw = full.clone();
+    raw.faces.drain(cell..cell + 2);
+    let (mesh, lp) = testutil::mesh_and_loop(&raw, |_, l| l.len() == 4);
     let r = run(&mesh, &lp, &Policy::default());
     assert_eq!(r.patch.triangles.len(), 2);
     let c = DVec3::new(2.0, 3.0, 0.0);
-    let (mesh, lp) = cut_mesh(&pos, &faces, |p| (p - c).length() < 0.5, c);
+    let (mesh, lp) = cut_mesh(full, |p| (p - c).length() < 0.5, c);
     assert_eq!(lp.len(), 6);
     let r = run(&mesh, &lp, &Policy::default());
     for p in &r.patch.new_vertices {

@@ -8,20 +8,8 @@ use crate::patch::{apply_patch, Hole};
 use crate::policy::{Policy, TriangulationWeight, Weights};
 use proptest::prelude::*;
 
-pub(crate) use crate::testutil::icosphere;
+use crate::testutil::{cut_faces, cylinder, grid, icosphere};
 
-/// Removes the faces whose centroid satisfies `cut`.
-fn cut(raw: &RawMesh, cut: impl Fn(DVec3) -> bool) -> RawMesh {
-    let mut out = raw.clone();
-    out.faces.retain(|f| {
-        let c = (raw.positions[f[0] as usize]
-            + raw.positions[f[1] as usize]
-            + raw.positions[f[2] as usize])
-            / 3.0;
-        !cut(c)
-    });
-    out
-}
 
 /// The mesh and the hole whose loop satisfies `pick` (the only such loop).
 fn mesh_and_hole(raw: &RawMesh, pick: impl Fn(&Mesh, &[VertexId]) -> bool) -> (Mesh, Hole, Policy) {
@@ -72,21 +60,8 @@ fn q_share(mesh: &Mesh, hole: &Hole, patch: &Patch) -> f64 {
 
 /// Grid of (n+1)^2 vertices on z = 0 with the cells within `rad` of the centre removed.
 fn planar_grid_hole(n: usize, rad: f64) -> RawMesh {
-    let mut raw = RawMesh::default();
-    for j in 0..=n {
-        for i in 0..=n {
-            raw.positions.push(DVec3::new(i as f64, j as f64, 0.0));
-        }
-    }
-    let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
-    for j in 0..n {
-        for i in 0..n {
-            raw.faces.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-            raw.faces.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-        }
-    }
     let c = DVec3::new(n as f64 / 2.0, n as f64 / 2.0, 0.0);
-    cut(&raw, |p| (p - c).length() < rad)
+    cut_faces(grid(n, 0.0, n as f64, |_, _| 0.0), |p| (p - c).length() < rad)
 }
 
 fn interior_loop(n: usize) -> impl Fn(&Mesh, &[VertexId]) -> bool {
@@ -128,7 +103,7 @@ fn sphere_case(level: usize, angle_deg: f64) -> (Mesh, Hole, Policy) {
     let r = 10.0;
     let raw = icosphere(level, r);
     let dir = DVec3::new(0.3, 0.5, 0.8).normalize();
-    let raw = cut(&raw, |p| {
+    let raw = cut_faces(raw, |p| {
         p.normalize().dot(dir) > angle_deg.to_radians().cos()
     });
     mesh_and_hole(&raw, |_, _| true)
@@ -183,23 +158,9 @@ fn sphere_hole_of_about_100_vertices() {
 fn cylinder_case() -> (Mesh, Hole, Policy, f64) {
     // open cylinder of radius 5 along z, 64 segments, 40 rings of height 0.5
     let (r, seg, rings, dz) = (5.0, 64usize, 40usize, 0.5);
-    let mut raw = RawMesh::default();
-    for j in 0..=rings {
-        for i in 0..seg {
-            let t = i as f64 / seg as f64 * std::f64::consts::TAU;
-            raw.positions
-                .push(DVec3::new(r * t.cos(), r * t.sin(), j as f64 * dz));
-        }
-    }
-    let id = |i: usize, j: usize| (j * seg + i % seg) as u32;
-    for j in 0..rings {
-        for i in 0..seg {
-            raw.faces.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-            raw.faces.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-        }
-    }
+    let raw = cylinder(r, seg, rings + 1, dz, 0.0, false);
     let centre = DVec3::new(r, 0.0, 10.0);
-    let raw = cut(&raw, |p| (p - centre).length() < 2.6);
+    let raw = cut_faces(raw, |p| (p - centre).length() < 2.6);
     let top = rings as f64 * dz;
     let (m, h, p) = mesh_and_hole(&raw, move |m, l| {
         l.iter().all(|&v| m.pos(v).z > 0.0 && m.pos(v).z < top)

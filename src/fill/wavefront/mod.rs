@@ -1,7 +1,7 @@
 //! Improved wavefront with curvature restoration.
 //!
 //! Paper 004: Huang, Li, Ye, "Improved Hole Repairing Method Based on Wavefront Method"
-//! (2022, DOI 10.21203/rs.3.rs-1345779/v1); ALGORITHMS.md section C.
+//! (2022, DOI 10.21203/rs.3.rs-1345779/v1); ALGORITHMS C (docs/references.md).
 //!
 //! * §2.2 (improved wavefront): the front starts as the hole loop. `Avglen`, the mean
 //!   boundary edge length of the original hole, is measured once. At each step the front
@@ -38,15 +38,10 @@
 //!   distance `Avglen` (see `side_elevation`), not on the one edge: scanned boundaries
 //!   zig-zag, and single-edge slopes made fronts climb out of the hole.
 //!
-//!   Measured (tests below, mean |error| of the new vertices): the edge plane over-curves
-//!   (points sink below a sphere) and the restoration rotation lifts them back, so with
-//!   `edge_plane` restoration helps (sum over eight curved holes 0.169 against 0.252;
-//!   better on seven, 1.5 % worse on one). With `interpolated` the rotation only flattens
-//!   (each triangle is turned to the normal of the front edge it grows from, which lags
-//!   the surface). `interpolated` without restoration is the closest setting on spheres
-//!   and the paraboloid, 6 to 9 times closer (sphere hole of 140: 0.0032 R against
-//!   0.020 R), while on the cylinder and the saddle the paper's setting is as good or
-//!   better (cylinder 0.0057 against 0.0047, saddle 0.0096 against 0.0062).
+//!   With `edge_plane` the points over-curve (sink below a sphere) and the restoration
+//!   rotation lifts them back; with `interpolated` the rotation only flattens (each
+//!   triangle is turned to the normal of the front edge it grows from, which lags the
+//!   surface), so `interpolated` goes without restoration (the tests measure both).
 //! * Case (a) adds no point, so its rotation would move nothing: skipped. Case (b): each of
 //!   the two triangles is rotated; only the new point may move (front vertices stay), so the
 //!   new point goes to the mean of its two rotated positions. Case (c): the paper's labels
@@ -58,8 +53,7 @@
 //!   a reflex vertex it would otherwise point into the surface).
 //! * The random draw uses `ChaCha8` seeded from `policy.seed` mixed with the hole id, so the
 //!   same input and policy give the same patch bit for bit.
-//! * The paper is silent on robustness (its conclusion admits overlaps). Added here, as the
-//!   issue asks:
+//! * The paper is silent on robustness (its conclusion admits overlaps). Added here:
 //!   - a new point within `merge_distance · Avglen` of a non-adjacent vertex of the same
 //!     front is merged into it, splitting the front in two (a front of two vertices is two
 //!     sides of one edge and is zipped); a new point that close to the processed vertex or
@@ -83,21 +77,16 @@
 //!     `max_steps_per_vertex · k` steps, every remaining front is closed as a residual loop
 //!     ([`residual`]: minimum-area triangulation in 3-D, refined to `Avglen`, thin-plate
 //!     faired against the triangles around it; kept unfaired when the faired piece
-//!     crosses a triangle around the front and the unfaired one does not, as in a fold of the
-//!     bunny scan's hole 2). Closes 1999 of 2000 random star-shaped loops.
+//!     crosses a triangle around the front and the unfaired one does not).
 //!   - a front whose patch area passes `max_area_ratio` (2.0) times the loop's vector
 //!     area (a lower bound on the area of any surface the loop bounds) has run away: it
-//!     climbed into a dome over the hole or folded (measured on the bench: full fronts
-//!     that pass the checks 1.0 to 2.3, runaway ones 2.5 to 4.7, and all four
-//!     full-front variants of such a hole ran away; the one at 2.3 is closer to the
-//!     true surface from the residual variant). The run stops at once and the other
+//!     climbed into a dome over the hole or folded. The run stops at once and the other
 //!     full-front variants are skipped, straight to those that close a residual early;
 //!   - the whole run is self-checked ([`retry`]): when its patch fails the dispatcher's
 //!     checks, a local repair (edge flips, then re-triangulation of the region around the
 //!     failing triangle) is tried, then the same method with the settings of [`variants`]
 //!     (the robust `interpolated` placement without restoration, the next seed, a short
-//!     front whose residual is closed as above, `alpha = 90`). On the shared bench
-//!     (35 holes) this closes every hole; before, 3 fronts got stuck or overlapped.
+//!     front whose residual is closed as above, `alpha = 90`).
 //!
 //! Cost: a binary heap of front angles with lazy invalidation (only the vertices a step
 //! touches are re-measured) and spatial hashes of the front vertices and the triangles, so
@@ -112,8 +101,10 @@ mod wave;
 #[cfg(test)]
 mod tests;
 
+use super::kit::front::{edge_key, Entry, FrontQueue};
 use super::kit::{check_patch_size, residual, retry, Cause, FillContext, FillError, TooLarge};
 use crate::fasthash::{HashMap, HashSet};
+use crate::geometry::grid::PlaneGrid;
 use crate::geometry::measure;
 use crate::geometry::predicates::{ccw2d, overlap2d, overlap2d_ccw, p2, seg_crosses_tri, P2};
 use crate::patch::Patch;
@@ -122,8 +113,6 @@ use crate::report::PatchQuality;
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use std::cmp::{Ordering, Reverse};
-use std::collections::BinaryHeap;
 use std::f64::consts::{FRAC_PI_4, PI, TAU};
 use wave::Wave;
 
@@ -151,8 +140,6 @@ const MAX_EL: f64 = 1.4;
 const MIN_FRONT_ANGLE: f64 = 1.0 * PI / 180.0;
 /// A stuck front of at most this many vertices is closed by ear clipping.
 const SMALL_FRONT: usize = 10;
-/// A triangle spanning more cells than this is kept in a list tested every time.
-const MAX_CELLS: i64 = 512;
 
 /// Fills the hole with the improved wavefront (policy section `[wavefront]`): the
 /// policy's settings first; when their patch fails the checks, the variants of

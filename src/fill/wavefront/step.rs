@@ -246,7 +246,7 @@ impl Wave {
     }
 
     pub(super) fn edge_exists(&self, a: u32, b: u32) -> bool {
-        let e = ekey(a, b);
+        let e = edge_key(a, b);
         self.edges.contains(&e)
             || ((a as usize) < self.k && (b as usize) < self.k && self.mesh_edges.contains(&e))
     }
@@ -457,7 +457,7 @@ impl Wave {
             let (a, b) = (v[(c + 1) % 3], v[(c + 2) % 3]);
             let across_mesh = (a as usize) < self.k
                 && (b as usize) < self.k
-                && self.mesh_edges.contains(&ekey(a, b));
+                && self.mesh_edges.contains(&edge_key(a, b));
             if across_mesh && !self.relaxed && ang.iter().any(|&x| !(x >= self.min_angle)) {
                 return false;
             }
@@ -630,8 +630,8 @@ impl Wave {
                         owner.insert((tt[c], tt[(c + 1) % 3]), k);
                     }
                 }
-                self.edges.remove(&ekey(a, b));
-                self.edges.insert(ekey(x, y));
+                self.edges.remove(&edge_key(a, b));
+                self.edges.insert(edge_key(x, y));
                 changed = true;
             }
             if !changed {
@@ -643,7 +643,7 @@ impl Wave {
     pub(super) fn add_triangle(&mut self, t: [u32; 3]) {
         let p = t.map(|i| self.pos[i as usize]);
         for c in 0..3 {
-            self.edges.insert(ekey(t[c], t[(c + 1) % 3]));
+            self.edges.insert(edge_key(t[c], t[(c + 1) % 3]));
             if let Some((wt, n)) = face_weight(p[c], p[0], p[1], p[2]) {
                 self.acc[t[c] as usize] += wt * n;
             }

@@ -1,103 +1,35 @@
-use super::wave::{inside_or_near, Grid};
+use super::wave::inside_or_near;
 use super::*;
 use crate::check::{check_degenerate, check_topology, patch_positions};
 use crate::fill::kit::Deadline;
 use crate::io::RawMesh;
 use crate::mesh::{Mesh, VertexId};
 use crate::patch::{apply_patch, Hole};
-use crate::policy::{Method, Policy, Settings};
+use crate::policy::{Policy, Settings};
+use crate::testutil::{self, loop_near};
 use proptest::prelude::*;
 
 /// A regular grid `n x n` over `[-1, 1]^2` with heights `z(x, y)`, faces up, and the
 /// faces whose centroid lies within `r` of the origin removed.
 fn grid_hole(n: usize, r: f64, z: impl Fn(f64, f64) -> f64) -> RawMesh {
-    let mut raw = RawMesh::default();
-    for j in 0..=n {
-        for i in 0..=n {
-            let x = -1.0 + 2.0 * i as f64 / n as f64;
-            let y = -1.0 + 2.0 * j as f64 / n as f64;
-            raw.positions.push(DVec3::new(x, y, z(x, y)));
-        }
-    }
-    let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
-    for j in 0..n {
-        for i in 0..n {
-            for f in [
-                [id(i, j), id(i + 1, j), id(i + 1, j + 1)],
-                [id(i, j), id(i + 1, j + 1), id(i, j + 1)],
-            ] {
-                let c = f.iter().map(|&v| raw.positions[v as usize]).sum::<DVec3>() / 3.0;
-                if c.x * c.x + c.y * c.y > r * r {
-                    raw.faces.push(f);
-                }
-            }
-        }
-    }
-    raw
+    testutil::cut_faces(testutil::grid(n, -1.0, 1.0, z), |c| {
+        c.x * c.x + c.y * c.y <= r * r
+    })
 }
 
-/// An icosphere of radius `rad` subdivided `level` times, faces outward, with the
-/// faces whose centroid direction is within `cap` radians of `dir` removed.
-fn sphere_hole(level: usize, rad: f64, dir: DVec3, cap: f64) -> RawMesh {
-    crate::testutil::sphere_cap_removed(level, rad, dir, cap)
-}
 
 /// An open cylinder of radius `rad` around z, `nt` columns, `nz` rows of height
 /// `h`, faces outward, with the faces whose centroid is within `r` of `(rad, 0, 0)`
 /// removed.
 fn cylinder_hole(rad: f64, nt: usize, nz: usize, h: f64, r: f64) -> RawMesh {
-    let mut raw = RawMesh::default();
-    let z0 = -(nz as f64) * h / 2.0;
-    for j in 0..=nz {
-        for i in 0..nt {
-            let a = TAU * i as f64 / nt as f64;
-            raw.positions
-                .push(DVec3::new(rad * a.cos(), rad * a.sin(), z0 + j as f64 * h));
-        }
-    }
-    let id = |i: usize, j: usize| (j * nt + i % nt) as u32;
+    let raw = testutil::cylinder(rad, nt, nz + 1, h, -(nz as f64) * h / 2.0, false);
     let hc = DVec3::new(rad, 0.0, 0.0);
-    for j in 0..nz {
-        for i in 0..nt {
-            for f in [
-                [id(i, j), id(i + 1, j), id(i + 1, j + 1)],
-                [id(i, j), id(i + 1, j + 1), id(i, j + 1)],
-            ] {
-                let c = f.iter().map(|&v| raw.positions[v as usize]).sum::<DVec3>() / 3.0;
-                if (c - hc).length() > r {
-                    raw.faces.push(f);
-                }
-            }
-        }
-    }
-    raw
+    testutil::cut_faces(raw, |c| (c - hc).length() <= r)
 }
 
-/// The loop of `mesh` whose centroid is nearest `p`.
-fn loop_near(mesh: &Mesh, p: DVec3) -> Vec<VertexId> {
-    let mut loops = mesh.topo.boundary_loops();
-    loops.sort_by(|a, b| {
-        let c = |l: &Vec<VertexId>| {
-            l.iter()
-                .map(|&v| (mesh.pos(v) - p).length())
-                .fold(0.0, f64::max)
-        };
-        c(a).total_cmp(&c(b))
-    });
-    loops.swap_remove(0)
-}
 
 fn run(mesh: &Mesh, l: Vec<VertexId>, policy: &Policy) -> (Hole, Result<Patch, FillError>) {
-    let hole = Hole::new(0, mesh, l, policy);
-    let ctx = FillContext {
-        mesh,
-        hole: &hole,
-        policy,
-        deadline: Deadline::none(),
-        checker: None,
-    };
-    let r = fill(&ctx);
-    (hole, r)
+    crate::fill::kit::run_on(mesh, l, policy, fill)
 }
 
 /// The patch passes the dispatcher's checks and applies to a valid, hole-free mesh.
@@ -189,7 +121,7 @@ fn sphere_err(p: DVec3) -> f64 {
 }
 
 fn sphere(level: usize, cap: f64) -> RawMesh {
-    sphere_hole(level, 1.0, DVec3::new(0.3, 0.2, 1.0), cap)
+    testutil::sphere_cap_removed(level, 1.0, SPHERE_DIR, cap)
 }
 
 const SPHERE_DIR: DVec3 = DVec3::new(0.3, 0.2, 1.0);
@@ -461,7 +393,9 @@ fn same_seed_same_patch_bits() {
     let a = bits(7);
     assert!(a.2.random_picks > 0);
     assert_eq!(a, bits(7));
-    let _ = bits(8);
+    // another seed also closes the hole (measure accepts its patch), picking at random
+    let b = bits(8);
+    assert!(b.2.random_picks > 0 && !b.1.is_empty());
     let raw = sphere(4, 0.9);
     let run = || measure(&raw, SPHERE_DIR, |_| {}, sphere_err).patch;
     let (p, q) = (run(), run());
@@ -525,17 +459,15 @@ fn noisy_sphere_still_closes() {
 /// its tangential relaxation, which crosses two patch triangles when done over the
 /// whole patch, passes with the vertices at the crossing held in place. The
 /// bunny is bench data that must not be copied into the repository
-/// (`../shared/bench-data/README.md`): the test reads it from there and says so and
-/// passes when it is absent.
+/// (`../shared/bench-data/README.md`): the test reads it from there, so it runs only
+/// where that is beside the checkout (`.ci/run` runs it there).
 #[test]
+#[ignore = "needs ../shared"]
 fn bunny_hole_2_residual_is_kept_unfaired_and_relaxed_around_its_fold() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../shared/bench-data/meshes/stanford-bunny.obj");
-    if !path.exists() {
-        eprintln!("skipped: {} is absent", path.display());
-        return;
-    }
-    let raw = crate::read(&path, None).unwrap();
+    let raw = crate::io::read(&path, None)
+        .unwrap_or_else(|e| panic!("this test needs {}: {e}", path.display()));
     let (mesh, _) = Mesh::from_raw(&raw);
     mesh.validate().unwrap();
     let loops = mesh.topo.boundary_loops();
@@ -611,31 +543,6 @@ fn bad_options_are_rejected_and_bad_loops_are_errors() {
         .unwrap();
     let (hole, r) = run(&mesh, l, &policy);
     accept(&mesh, &hole, &r.unwrap(), &policy);
-}
-
-/// Through the dispatcher: a policy that names only `wavefront` fills the sphere
-/// hole with it.
-#[test]
-fn dispatcher_fills_with_wavefront() {
-    let raw = sphere(4, 0.5);
-    let mut policy = Policy::default();
-    policy = policy
-        .edit(|s| s.dispatch.small = vec![Method::Wavefront])
-        .unwrap();
-    policy = policy
-        .edit(|s| s.dispatch.middle = vec![Method::Wavefront])
-        .unwrap();
-    policy = policy
-        .edit(|s| s.dispatch.large = vec![Method::Wavefront])
-        .unwrap();
-    let (out, report) = crate::repair(&raw, &policy).unwrap();
-    assert_eq!(report.holes.len(), 1);
-    let h = &report.holes[0];
-    assert_eq!(h.method, Some(Method::Wavefront), "{h:?}");
-    assert!(out.positions.len() > raw.positions.len());
-    let (m, _) = Mesh::from_raw(&out);
-    m.validate().unwrap();
-    assert!(m.topo.boundary_loops().is_empty());
 }
 
 proptest! {
@@ -806,64 +713,6 @@ fn crossing_count_agrees_with_summed_angles() {
         inside > total / 5 && inside < total * 4 / 5,
         "{inside} of {total}"
     );
-}
-
-/// A grid query reports each id at most once, every id whose box meets the query
-/// box among them (also boxes beyond the grid's extent, in its border cells), and
-/// exactly the ids whose cell ranges meet the query's.
-#[test]
-fn grid_query_reports_every_overlap_once() {
-    use rand::Rng;
-    let mut rng = ChaCha8Rng::seed_from_u64(11);
-    let n = DVec3::new(0.3, -0.2, 1.0).normalize();
-    let u = n.any_orthonormal_vector();
-    let w = n.cross(u);
-    let mut g = Grid::new(0.1, DVec3::new(0.1, 0.2, 0.3), u, w, 3.0);
-    let mut boxes = Vec::new();
-    let rand_box = |rng: &mut ChaCha8Rng, size: f64| {
-        let c = DVec3::new(
-            rng.random_range(-4.0..4.0),
-            rng.random_range(-4.0..4.0),
-            rng.random_range(-4.0..4.0),
-        );
-        let h = DVec3::new(
-            rng.random_range(0.0..size),
-            rng.random_range(0.0..size),
-            rng.random_range(0.0..size),
-        );
-        (c - h, c + h)
-    };
-    for id in 0..400u32 {
-        let (lo, hi) = rand_box(&mut rng, if id % 50 == 0 { 6.0 } else { 0.6 });
-        if g.insert_box(lo, hi, id) {
-            boxes.push((id, lo, hi, g.range(lo, hi)));
-        }
-    }
-    assert!(boxes.len() < 400, "some boxes span too many cells");
-    let mut out = Vec::new();
-    let mut found = 0;
-    for q in 0..300 {
-        let (lo, hi) = rand_box(&mut rng, if q % 20 == 0 { 8.0 } else { 1.0 });
-        g.query_box(lo, hi, &mut out);
-        let r = g.range(lo, hi);
-        let mut want: Vec<u32> = boxes
-            .iter()
-            .filter(|(_, _, _, c)| c[0] <= r[2] && r[0] <= c[2] && c[1] <= r[3] && r[1] <= c[3])
-            .map(|b| b.0)
-            .collect();
-        let mut got = out.clone();
-        got.sort_unstable();
-        assert!(got.windows(2).all(|w| w[0] != w[1]), "an id twice");
-        want.sort_unstable();
-        assert_eq!(got, want);
-        for (id, blo, bhi, _) in &boxes {
-            if !(bhi.cmplt(lo).any() || hi.cmplt(*blo).any()) {
-                assert!(got.binary_search(id).is_ok(), "box {id} meets the query");
-                found += 1;
-            }
-        }
-    }
-    assert!(found > 100, "{found}");
 }
 
 /// A variant with fewer steps per vertex resumed from the copy the policy's run kept

@@ -17,35 +17,6 @@ pub(super) struct Node {
     pub(super) alive: bool,
 }
 
-/// A heap entry: `key` is θ plus a penalty of 2π per failed attempt.
-#[derive(Clone, Copy, Debug)]
-pub(super) struct Entry {
-    pub(super) key: f64,
-    pub(super) theta: f64,
-    pub(super) node: u32,
-    pub(super) version: u32,
-}
-
-impl PartialEq for Entry {
-    fn eq(&self, o: &Self) -> bool {
-        self.cmp(o) == Ordering::Equal
-    }
-}
-impl Eq for Entry {}
-impl PartialOrd for Entry {
-    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
-        Some(self.cmp(o))
-    }
-}
-impl Ord for Entry {
-    fn cmp(&self, o: &Self) -> Ordering {
-        self.key
-            .total_cmp(&o.key)
-            .then(self.node.cmp(&o.node))
-            .then(self.version.cmp(&o.version))
-    }
-}
-
 /// A triangle already in place (patch triangle or mesh face around the hole), with the
 /// patch indices of its corners where it has them.
 #[derive(Clone, Copy, Debug)]
@@ -56,115 +27,6 @@ pub(super) struct Placed {
     /// Bounding box (set by [`Wave::place`]).
     pub(super) lo: DVec3,
     pub(super) hi: DVec3,
-}
-
-/// A uniform grid of ids over the loop's best-fit plane: an id is stored in every cell
-/// that the projection of its box touches (positions beyond the grid fall in its border
-/// cells), in per-cell linked lists over one array (no allocation per cell; a copy is
-/// two array copies). A query reports each id whose cells meet the query's cells
-/// exactly once (in the first cell of the overlap). It is a broad phase only: callers
-/// test the ids' own boxes, so what they find does not depend on the grid.
-#[derive(Clone)]
-pub(super) struct Grid {
-    pub(super) centre: DVec3,
-    pub(super) u: DVec3,
-    pub(super) w: DVec3,
-    /// Plane coordinate of the grid's corner, inverse cell size, cells per side.
-    pub(super) origin: f64,
-    pub(super) inv: f64,
-    pub(super) n: usize,
-    /// First entry of each cell's list (`NONE`: empty).
-    pub(super) head: Vec<u32>,
-    /// Entries: id and next entry of the same cell.
-    pub(super) entries: Vec<(u32, u32)>,
-    /// Cell range `[i0, j0, i1, j1]` of each id (indexed by id).
-    pub(super) ranges: Vec<[u32; 4]>,
-}
-
-/// End of a cell's list.
-pub(super) const NONE: u32 = u32::MAX;
-/// Largest number of cells per side of a [`Grid`] (the cells grow past it).
-pub(super) const MAX_SIDE: usize = 256;
-
-impl Grid {
-    /// A grid with cells of about `cell` over the square of half-width `extent` around
-    /// `centre` in the plane spanned by `u` and `w` (unit, orthogonal).
-    pub(super) fn new(cell: f64, centre: DVec3, u: DVec3, w: DVec3, extent: f64) -> Grid {
-        let extent = if extent.is_finite() && extent > 0.0 {
-            extent
-        } else {
-            1.0
-        };
-        let cell = if cell.is_finite() && cell > 0.0 {
-            cell
-        } else {
-            extent
-        };
-        let n = ((2.0 * extent / cell).ceil() as usize).clamp(1, MAX_SIDE);
-        Grid {
-            centre,
-            u,
-            w,
-            origin: -extent,
-            inv: n as f64 / (2.0 * extent),
-            n,
-            head: vec![NONE; n * n],
-            entries: Vec::new(),
-            ranges: Vec::new(),
-        }
-    }
-    /// Cell range of the projection of the box `[lo, hi]`.
-    pub(super) fn range(&self, lo: DVec3, hi: DVec3) -> [u32; 4] {
-        let c = (lo + hi) * 0.5 - self.centre;
-        let h = (hi - lo) * 0.5;
-        let span = |a: DVec3| h.x * a.x.abs() + h.y * a.y.abs() + h.z * a.z.abs();
-        let (cu, ru) = (c.dot(self.u), span(self.u));
-        let (cw, rw) = (c.dot(self.w), span(self.w));
-        let max = (self.n - 1) as f64;
-        let cell = |x: f64| ((x - self.origin) * self.inv).floor().clamp(0.0, max) as u32;
-        [cell(cu - ru), cell(cw - rw), cell(cu + ru), cell(cw + rw)]
-    }
-    /// Inserts `id` into every cell the box touches; false when it spans more than
-    /// `MAX_CELLS` (the caller keeps such ids apart).
-    pub(super) fn insert_box(&mut self, lo: DVec3, hi: DVec3, id: u32) -> bool {
-        let r = self.range(lo, hi);
-        let cells = (r[2] - r[0] + 1) as i64 * (r[3] - r[1] + 1) as i64;
-        if cells > MAX_CELLS {
-            return false;
-        }
-        let i = id as usize;
-        if self.ranges.len() <= i {
-            self.ranges.resize(i + 1, [1, 1, 0, 0]);
-        }
-        self.ranges[i] = r;
-        for y in r[1]..=r[3] {
-            for x in r[0]..=r[2] {
-                let c = y as usize * self.n + x as usize;
-                self.entries.push((id, self.head[c]));
-                self.head[c] = (self.entries.len() - 1) as u32;
-            }
-        }
-        true
-    }
-    /// Every id in a cell the box touches, each once (in no particular order).
-    pub(super) fn query_box(&self, lo: DVec3, hi: DVec3, out: &mut Vec<u32>) {
-        out.clear();
-        let q = self.range(lo, hi);
-        for y in q[1]..=q[3] {
-            for x in q[0]..=q[2] {
-                let mut e = self.head[y as usize * self.n + x as usize];
-                while e != NONE {
-                    let (id, next) = self.entries[e as usize];
-                    let r = self.ranges[id as usize];
-                    // this is the first cell of the id's overlap with the query
-                    if x == r[0].max(q[0]) && y == r[1].max(q[1]) {
-                        out.push(id);
-                    }
-                    e = next;
-                }
-            }
-        }
-    }
 }
 
 /// A vertex of a step's chain: an existing front node or a new point.
@@ -201,13 +63,14 @@ pub(super) struct Wave {
     pub(super) mesh_edges: HashSet<(u32, u32)>,
     pub(super) nodes: Vec<Node>,
     pub(super) front_size: Vec<usize>,
-    pub(super) heap: BinaryHeap<Reverse<Entry>>,
+    /// Front nodes by θ plus a penalty of 2π per failed attempt (`data`: θ).
+    pub(super) heap: FrontQueue<f64>,
     pub(super) alive: Vec<u32>,
     pub(super) alive_pos: Vec<usize>,
     pub(super) placed: Vec<Placed>,
-    pub(super) tri_grid: Grid,
+    pub(super) tri_grid: PlaneGrid,
     pub(super) big: Vec<u32>,
-    pub(super) node_grid: Grid,
+    pub(super) node_grid: PlaneGrid,
     pub(super) rng: ChaCha8Rng,
     pub(super) fallback_normal: DVec3,
     /// New points must lie within `reach` of `centre` (the loop's centroid).
@@ -278,13 +141,6 @@ pub(super) fn inside_or_near(poly: &[(f64, f64)], p: (f64, f64), near: f64) -> b
     false
 }
 
-pub(super) fn ekey(a: u32, b: u32) -> (u32, u32) {
-    if a < b {
-        (a, b)
-    } else {
-        (b, a)
-    }
-}
 
 /// Weight ω = λ / G (Eqs. 2, 4) and unit normal of triangle (a, b, c) seen from corner `q`.
 pub(super) fn face_weight(q: DVec3, a: DVec3, b: DVec3, c: DVec3) -> Option<(f64, DVec3)> {
@@ -465,13 +321,13 @@ impl Wave {
             mesh_edges: HashSet::default(),
             nodes: Vec::with_capacity(2 * k),
             front_size: vec![k],
-            heap: BinaryHeap::new(),
+            heap: FrontQueue::new(),
             alive: Vec::with_capacity(2 * k),
             alive_pos: Vec::with_capacity(2 * k),
             placed: Vec::new(),
-            tri_grid: Grid::new(CELL * len, centre, pu, pw, reach + 2.0 * len),
+            tri_grid: PlaneGrid::new(CELL * len, centre, pu, pw, reach + 2.0 * len),
             big: Vec::new(),
-            node_grid: Grid::new(CELL * len, centre, pu, pw, reach + 2.0 * len),
+            node_grid: PlaneGrid::new(CELL * len, centre, pu, pw, reach + 2.0 * len),
             rng: ChaCha8Rng::seed_from_u64(
                 ctx.policy.seed ^ (ctx.hole.id as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
             ),
@@ -498,7 +354,7 @@ impl Wave {
         for (i, &v) in hole.iter().enumerate() {
             for nb in mesh.topo.neighbors(v) {
                 if let Some(&j) = index.get(&(nb.idx() as u32)) {
-                    w.mesh_edges.insert(ekey(i as u32, j));
+                    w.mesh_edges.insert(edge_key(i as u32, j));
                 }
             }
             for f in mesh.topo.vertex_faces(v) {
@@ -615,12 +471,12 @@ impl Wave {
         let theta = self.angle(n, nrm);
         let nd = &mut self.nodes[n as usize];
         nd.version = nd.version.wrapping_add(1);
-        self.heap.push(Reverse(Entry {
+        self.heap.push(Entry {
             key: theta + TAU * nd.fails as f64,
-            theta,
             node: n,
             version: nd.version,
-        }));
+            data: theta,
+        });
     }
 
     /// Re-measures a node whose neighbourhood changed.
@@ -639,8 +495,8 @@ impl Wave {
     }
 
     /// The current smallest entry (stale entries are dropped).
-    pub(super) fn peek(&mut self) -> Option<Entry> {
-        while let Some(Reverse(e)) = self.heap.peek().copied() {
+    pub(super) fn peek(&mut self) -> Option<Entry<f64>> {
+        while let Some(e) = self.heap.peek() {
             let nd = self.nodes[e.node as usize];
             if nd.alive && nd.version == e.version {
                 return Some(e);
@@ -690,7 +546,7 @@ impl Wave {
                 });
             }
             let node = match self.peek() {
-                Some(e) if e.theta < mu && self.nodes[e.node as usize].fails == 0 => e.node,
+                Some(e) if e.data < mu && self.nodes[e.node as usize].fails == 0 => e.node,
                 _ => {
                     self.stats.random_picks += 1;
                     let i = self.rng.random_range(0..self.alive.len());

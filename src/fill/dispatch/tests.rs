@@ -1,0 +1,202 @@
+//! The dispatcher end to end on small meshes: methods forced by the policy, patches
+//! checked against the mesh and against the patches accepted before them, rejected
+//! patches falling through to the next method.
+
+use super::*;
+use crate::io::RawMesh;
+use crate::policy::Checks;
+use crate::testutil::{
+    cells_removed, cut_faces, cylinder_with_hole, fan, grid, joined, mesh_and_loop,
+    sphere_cap_removed,
+};
+use glam::DVec3;
+
+fn v(x: f64, y: f64, z: f64) -> DVec3 {
+    DVec3::new(x, y, z)
+}
+
+/// An `n x n` sheet of unit cells at height `z` without the cells `removed` (i, j).
+fn sheet(n: usize, z: f64, removed: &[(usize, usize)]) -> RawMesh {
+    cells_removed(grid(n, 0.0, n as f64, |_, _| z), |i, j| removed.contains(&(i, j)))
+}
+
+/// The 2 x 2 cells of the sheets' hole.
+const HOLE: [(usize, usize); 4] = [(2, 2), (3, 2), (2, 3), (3, 3)];
+
+/// The loop of 8 vertices around the 2 x 2 hole at height `z`.
+fn hole_at(m: &Mesh, z: f64) -> Vec<crate::mesh::VertexId> {
+    m.topo
+        .boundary_loops()
+        .into_iter()
+        .find(|l| l.len() == 8 && l.iter().all(|&u| m.pos(u).z == z))
+        .expect("hole loop")
+}
+
+fn checks() -> Checks {
+    Checks {
+        self_intersection: true,
+        min_angle_deg: 0.5,
+    }
+}
+
+/// Every class sent to `method` alone.
+fn only(method: Method) -> Policy {
+    Policy::default()
+        .edit(|s| {
+            s.dispatch.small = vec![method];
+            s.dispatch.middle = vec![method];
+            s.dispatch.large = vec![method];
+        })
+        .unwrap()
+}
+
+#[test]
+fn a_proposal_that_meets_an_earlier_patch_fails_over_to_the_next_method() {
+    // the parallel phase checked the tall fan on the lower hole against the mesh
+    // as read (clean); the upper hole's lid was accepted first, and the fan pokes
+    // through it: the serial phase must reject it and try the next method
+    let raw = joined(sheet(6, 0.0, &HOLE), &sheet(6, 0.3, &HOLE));
+    let (mut m, _) = Mesh::from_raw(&raw);
+    let lower = hole_at(&m, 0.0);
+    let upper = hole_at(&m, 0.3);
+    let policy = Policy::default();
+    let mut chk = Checker::new(&m);
+    let tall = fan(lower.len(), v(3., 3., 1.0));
+    let q = chk.check_patch(&m, &lower, &tall, &checks()).unwrap();
+    // nothing added yet: nothing to meet
+    chk.check_against_added(&m, &lower, &tall, &checks())
+        .unwrap();
+    let up = Hole::new(1, &m, upper, &policy);
+    let lid = fill_hole(&mut m, &up, &policy, &mut chk);
+    assert_eq!(lid.status, HoleStatus::Filled);
+    m.validate().unwrap();
+    let e = chk
+        .check_against_added(&m, &lower, &tall, &checks())
+        .unwrap_err();
+    assert!(
+        matches!(e, crate::check::CheckFailure::SelfIntersection { .. }),
+        "{e}"
+    );
+    let low = Hole::new(0, &m, lower, &policy);
+    let methods = methods_for(&policy, low.class).to_vec();
+    assert!(methods.len() >= 2);
+    let proposal = Proposal {
+        tried: Vec::new(),
+        accepted: Some((0, tall, q, 0.0)),
+        ms: 0.0,
+    };
+    let rep = finish_hole(&mut m, &low, &policy, &mut chk, proposal);
+    m.validate().unwrap();
+    assert_eq!(rep.status, HoleStatus::Filled, "{}", rep.reason);
+    assert_eq!(rep.tried[0].method, methods[0]);
+    assert_eq!(rep.tried[0].outcome, Outcome::Rejected);
+    assert!(
+        rep.tried[0].reason.contains("intersects mesh face"),
+        "{}",
+        rep.tried[0].reason
+    );
+    assert_eq!(rep.method, Some(methods[1]));
+    assert_eq!(
+        m.topo.boundary_loops().len(),
+        2,
+        "only the sheets' outer borders"
+    );
+}
+
+#[test]
+fn dispatcher_rejects_a_fan_through_an_obstacle_and_fills_without_it() {
+    let policy = Policy::default()
+        .edit(|s| s.dispatch.small = vec![Method::Fan])
+        .unwrap();
+    for obstacle in [true, false] {
+        // a grid missing cell (2, 2), and a small upright triangle through the
+        // cell's centre (its own component)
+        let mut raw = sheet(5, 0.0, &[(2, 2)]);
+        if obstacle {
+            let b = raw.positions.len() as u32;
+            raw.positions
+                .extend([v(2.5, 2.4, -0.5), v(2.6, 2.6, 0.5), v(2.4, 2.6, 0.5)]);
+            raw.faces.push([b, b + 1, b + 2]);
+        }
+        let (mut m, l) = mesh_and_loop(&raw, |_, l| l.len() == 4);
+        let hole = Hole::new(0, &m, l, &policy);
+        let mut chk = Checker::new(&m);
+        let nf = m.num_faces();
+        let rep = fill_hole(&mut m, &hole, &policy, &mut chk);
+        if obstacle {
+            assert_eq!(rep.status, HoleStatus::Failed);
+            assert_eq!(rep.tried[0].outcome, Outcome::Rejected);
+            assert!(
+                rep.tried[0].reason.contains("intersects mesh face"),
+                "{}",
+                rep.tried[0].reason
+            );
+            assert_eq!(m.num_faces(), nf);
+        } else {
+            assert_eq!(rep.status, HoleStatus::Filled, "{}", rep.reason);
+            assert_eq!(m.num_faces(), nf + 4);
+            m.validate().unwrap();
+            // the patch's faces were committed to the checker
+            assert_eq!(chk.committed_faces(), 4);
+        }
+    }
+}
+
+/// A large hole goes to the advancing front, whose patch passes the checks and is
+/// applied.
+#[test]
+fn dispatcher_fills_a_large_hole_with_the_front() {
+    let c = DVec3::new(15.0, 15.0, 0.0);
+    let raw = cut_faces(grid(30, 0.0, 30.0, |_, _| 0.0), |p| (p - c).length() < 9.0);
+    let (mut mesh, lp) = mesh_and_loop(&raw, |_, l| l.len() != 4 * 30);
+    // paper 002's list for large holes (the default puts wavefront first)
+    let policy = Policy::default()
+        .edit(|s| s.dispatch.large = vec![Method::AdvancingFront, Method::MinAreaFair])
+        .unwrap();
+    let hole = Hole::new(0, &mesh, lp, &policy);
+    let mut checker = Checker::new(&mesh);
+    let rep = fill_hole(&mut mesh, &hole, &policy, &mut checker);
+    assert_eq!(rep.status, HoleStatus::Filled, "{}", rep.reason);
+    assert_eq!(rep.method, Some(Method::AdvancingFront));
+    mesh.validate().unwrap();
+    assert_eq!(mesh.topo.boundary_loops().len(), 1);
+}
+
+/// Forced by the policy for every class, HPDE's patches pass the dispatcher's full
+/// checks (including self-intersection against the mesh) and are applied as HPDE's.
+#[test]
+fn dispatcher_accepts_hpde_patches() {
+    let policy = only(Method::Hpde);
+    let sphere = |level, cap| {
+        mesh_and_loop(&sphere_cap_removed(level, 1.0, DVec3::Z, cap), |_, _| true)
+    };
+    for (mut mesh, lp) in [
+        sphere(3, 0.75),
+        sphere(4, 1.1),
+        cylinder_with_hole(48, 30, 0.7, 1.2),
+    ] {
+        let loops = mesh.topo.boundary_loops().len();
+        let hole = Hole::new(0, &mesh, lp, &policy);
+        let mut chk = Checker::new(&mesh);
+        let rep = fill_hole(&mut mesh, &hole, &policy, &mut chk);
+        assert_eq!(rep.status, HoleStatus::Filled, "{:?}", rep.tried);
+        assert_eq!(rep.method, Some(Method::Hpde));
+        mesh.validate().unwrap();
+        assert_eq!(mesh.topo.boundary_loops().len(), loops - 1);
+    }
+}
+
+/// A policy that names only `wavefront` fills the sphere hole with it.
+#[test]
+fn dispatcher_fills_with_wavefront() {
+    let policy = only(Method::Wavefront);
+    let raw = sphere_cap_removed(4, 1.0, DVec3::new(0.3, 0.2, 1.0), 0.5);
+    let (mut mesh, lp) = mesh_and_loop(&raw, |_, _| true);
+    let hole = Hole::new(0, &mesh, lp, &policy);
+    let mut chk = Checker::new(&mesh);
+    let rep = fill_hole(&mut mesh, &hole, &policy, &mut chk);
+    assert_eq!(rep.method, Some(Method::Wavefront), "{rep:?}");
+    assert!(mesh.num_vertices() > raw.positions.len());
+    mesh.validate().unwrap();
+    assert!(mesh.topo.boundary_loops().is_empty());
+}

@@ -1,0 +1,623 @@
+//! Attributes through the repair (issue 18): round trips in every format (every input
+//! element's attributes bit-exact), interpolation oracles for the new elements, and
+//! the repair log's `attributes` section from the real binary.
+
+mod common;
+use common::*;
+use holefill::io::attrs::{PropData, Values};
+use holefill::io::{self, Format, RawMesh};
+use holefill::policy::Policy;
+use std::fmt::Write as _;
+use std::path::Path;
+
+fn repair(raw: &RawMesh) -> (RawMesh, holefill::report::RepairReport) {
+    holefill::repair(raw, &Policy::default()).expect("repair")
+}
+
+/// The values of a scalar property as f64 bits.
+fn bits(d: &PropData) -> Vec<u64> {
+    match d {
+        PropData::Scalar(v) => (0..v.len()).map(|i| v.get(i).unwrap().to_bits()).collect(),
+        PropData::List { starts, items, .. } => starts
+            .iter()
+            .map(|&s| s)
+            .chain((0..items.len()).map(|i| items.get(i).unwrap().to_bits()))
+            .collect(),
+    }
+}
+
+fn prop<'a>(raw: &'a RawMesh, name: &str) -> &'a PropData {
+    &raw.attrs
+        .vertex
+        .iter()
+        .find(|p| p.name == name)
+        .unwrap_or_else(|| panic!("no vertex property {name}"))
+        .data
+}
+
+/// The PLY text of a soup with every kind of property: normals, colours, quality,
+/// per-vertex UVs, an integer label and a list per vertex; per face an int, a
+/// ushort and a texcoord list; a third element; comments.
+fn rich_ply(s: &Soup) -> String {
+    let mut t = String::new();
+    writeln!(
+        t,
+        "ply\nformat ascii 1.0\ncomment scanner XYZ-3000\nobj_info serial 42\n\
+         element vertex {}\nproperty float x\nproperty float y\nproperty float z\n\
+         property float nx\nproperty float ny\nproperty float nz\n\
+         property uchar red\nproperty uchar green\nproperty uchar blue\n\
+         property float quality\nproperty double s\nproperty double t\n\
+         property int label\nproperty list uchar short neighbours\n\
+         element face {}\nproperty list uchar int vertex_indices\nproperty int texnumber\n\
+         property ushort flags\nproperty list uchar float texcoord\n\
+         element camera 1\nproperty double focal\nproperty list uchar uint ids\nend_header",
+        s.v.len(),
+        s.f.len()
+    )
+    .unwrap();
+    for (i, p) in s.v.iter().enumerate() {
+        let n = {
+            let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt().max(1e-9);
+            [p[0] / l, p[1] / l, p[2] / l]
+        };
+        writeln!(
+            t,
+            "{} {} {} {} {} {} {} {} {} {} {} {} {} 2 {} -{}",
+            p[0] as f32,
+            p[1] as f32,
+            p[2] as f32,
+            n[0] as f32,
+            n[1] as f32,
+            n[2] as f32,
+            (i * 7) % 256,
+            (i * 13) % 256,
+            (i * 29) % 256,
+            (0.1 + i as f32 * 0.37) % 1.0,
+            p[0] * 0.5 + 0.5,
+            p[1] * 0.5 + 0.5,
+            (i % 3) as i32 - 1,
+            i % 300,
+            i % 7
+        )
+        .unwrap();
+    }
+    for (k, f) in s.f.iter().enumerate() {
+        let uv = |v: usize| (s.v[v][0] * 0.5 + 0.5, s.v[v][1] * 0.5 + 0.5);
+        let (a, b, c) = (uv(f[0]), uv(f[1]), uv(f[2]));
+        writeln!(
+            t,
+            "3 {} {} {} {} {} 6 {} {} {} {} {} {}",
+            f[0],
+            f[1],
+            f[2],
+            k % 2,
+            (k * 977) % 65536,
+            a.0 as f32,
+            a.1 as f32,
+            b.0 as f32,
+            b.1 as f32,
+            c.0 as f32,
+            c.1 as f32
+        )
+        .unwrap();
+    }
+    t.push_str("35.5 3 1 2 3\n");
+    t
+}
+
+/// Everything but the header line holefill adds compares equal.
+fn same_attrs(a: &RawMesh, b: &RawMesh) {
+    let mut a = a.attrs.clone();
+    let mut b = b.attrs.clone();
+    for x in [&mut a, &mut b] {
+        if let Some(p) = x.ply.as_mut() {
+            p.header.retain(|l| l != "comment written by holefill");
+        }
+    }
+    assert_eq!(a, b);
+}
+
+fn write_read(raw: &RawMesh, dir: &Path, name: &str) -> RawMesh {
+    let p = dir.join(name);
+    io::write(&p, raw, None).expect("write");
+    io::read(&p, None).expect("read back")
+}
+
+#[test]
+fn ply_every_property_round_trips_bit_exact_in_every_encoding() {
+    let dir = tempdir();
+    let s = icosphere(1);
+    let src = dir.path().join("rich.ply");
+    std::fs::write(&src, rich_ply(&s)).unwrap();
+    let raw = io::read(&src, None).unwrap();
+    assert_eq!(
+        raw.attrs.vertex.len(),
+        11,
+        "{:?}",
+        raw.attrs.vertex.iter().map(|p| &p.name).collect::<Vec<_>>()
+    );
+    assert_eq!(raw.attrs.face.len(), 2);
+    assert!(raw.attrs.uv.is_some());
+    let ply = raw.attrs.ply.as_ref().unwrap();
+    assert_eq!(
+        ply.header,
+        ["comment scanner XYZ-3000", "obj_info serial 42"]
+    );
+    assert_eq!(ply.elements.len(), 1);
+    // a closed mesh: the repair changes nothing, and every value comes back
+    let (out, report) = repair(&raw);
+    assert_eq!(report.summary.holes, 0);
+    assert!(
+        report
+            .attributes
+            .read
+            .iter()
+            .any(|r| r == "vertex quality (f32)"),
+        "{:?}",
+        report.attributes.read
+    );
+    same_attrs(&raw, &out);
+    for enc in [
+        io::Encoding::Ascii,
+        io::Encoding::BinaryLittleEndian,
+        io::Encoding::BinaryBigEndian,
+    ] {
+        let mut o = out.clone();
+        o.encoding = enc;
+        let back = write_read(&o, dir.path(), "out.ply");
+        same_attrs(&raw, &back);
+        assert_eq!(back.colors, raw.colors);
+        let pb = |m: &RawMesh| {
+            m.positions
+                .iter()
+                .map(|p| p.to_array().map(f64::to_bits))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(pb(&back), pb(&raw));
+    }
+}
+
+#[test]
+fn ply_holed_input_elements_unchanged_and_new_ones_filled() {
+    let dir = tempdir();
+    let (s, _) = cut(&icosphere(3), [0.0, 0.0, 1.0], 0.3);
+    let src = dir.path().join("holed.ply");
+    std::fs::write(&src, rich_ply(&s)).unwrap();
+    let raw = io::read(&src, None).unwrap();
+    let (out, report) = repair(&raw);
+    assert_eq!(report.summary.filled, 1);
+    let nv = raw.positions.len();
+    assert!(out.positions.len() > nv);
+    for p in &raw.attrs.vertex {
+        let o = prop(&out, &p.name);
+        assert_eq!(o.len(), out.positions.len());
+        match (&p.data, o) {
+            (PropData::Scalar(a), PropData::Scalar(b)) => {
+                assert_eq!(a.ty(), b.ty());
+                for i in 0..nv {
+                    assert_eq!(
+                        a.get(i).unwrap().to_bits(),
+                        b.get(i).unwrap().to_bits(),
+                        "{} {i}",
+                        p.name
+                    );
+                }
+            }
+            (a, b) => assert_eq!(bits(a)[..nv], bits(b)[..nv]),
+        }
+    }
+    // new vertices: normals from the surface (unit, outward on the sphere), quality
+    // within the rim's range, labels from the rim
+    let PropData::Scalar(Values::F32(nz)) = prop(&out, "nz") else {
+        panic!()
+    };
+    let PropData::Scalar(Values::F32(q)) = prop(&out, "quality") else {
+        panic!()
+    };
+    let PropData::Scalar(Values::F32(q0)) = prop(&raw, "quality") else {
+        panic!()
+    };
+    let (lo, hi) = q0
+        .iter()
+        .fold((f32::MAX, f32::MIN), |(l, h), &x| (l.min(x), h.max(x)));
+    for v in nv..out.positions.len() {
+        assert!(nz[v] > 0.8, "normal of new vertex {v}: {}", nz[v]);
+        assert!(q[v] >= lo && q[v] <= hi);
+    }
+    // every output face that is an input face keeps its values; new faces take the
+    // neighbours' texnumber
+    let key = |f: [u32; 3]| {
+        let mut k = f;
+        k.sort_unstable();
+        k
+    };
+    let input: std::collections::HashMap<[u32; 3], usize> = raw
+        .faces
+        .iter()
+        .enumerate()
+        .map(|(i, f)| (key(*f), i))
+        .collect();
+    let fb = |m: &RawMesh, k: usize| bits(&m.attrs.face[1].data)[k];
+    let mut new_faces = 0;
+    for (k, f) in out.faces.iter().enumerate() {
+        match input.get(&key(*f)) {
+            Some(&j) => assert_eq!(fb(&out, k), fb(&raw, j)),
+            None => new_faces += 1,
+        }
+    }
+    assert!(new_faces > 0);
+    let uv = out.attrs.uv.as_ref().unwrap();
+    assert_eq!(
+        report.attributes.uv_patches.mapped, 1,
+        "{:?}",
+        report.attributes
+    );
+    assert!(uv.index.iter().all(Option::is_some));
+    // written and read back: the same
+    let back = write_read(&out, dir.path(), "out.ply");
+    for (a, b) in out.attrs.vertex.iter().zip(&back.attrs.vertex) {
+        assert_eq!(a, b, "{}", a.name);
+    }
+    assert_eq!(out.attrs.face, back.attrs.face);
+    // per corner (the file stores texcoord per face, so its table is per corner)
+    let (u0, u1) = (
+        out.attrs.uv.as_ref().unwrap(),
+        back.attrs.uv.as_ref().unwrap(),
+    );
+    for k in 0..out.faces.len() {
+        for c in 0..3 {
+            let (a, b) = (u0.at(k, c).unwrap(), u1.at(k, c).unwrap());
+            assert_eq!(
+                a.map(f64::to_bits),
+                b.map(f64::to_bits),
+                "face {k} corner {c}"
+            );
+        }
+    }
+    assert_eq!(
+        out.attrs.ply,
+        back.attrs.ply.map(|mut p| {
+            p.header.retain(|l| l != "comment written by holefill");
+            p
+        })
+    );
+}
+
+/// A textured OBJ: the upper part of a sphere, UV = (x, y) / 2 + 1/2 (one chart),
+/// normals per corner, two materials, groups, smoothing.
+fn textured_obj(s: &Soup) -> String {
+    let mut t = String::from("# scan\nmtllib scan.mtl\n");
+    for p in &s.v {
+        writeln!(t, "v {} {} {}", p[0], p[1], p[2]).unwrap();
+    }
+    for p in &s.v {
+        writeln!(t, "vt {} {}", p[0] * 0.5 + 0.5, p[1] * 0.5 + 0.5).unwrap();
+    }
+    for p in &s.v {
+        let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+        writeln!(t, "vn {} {} {}", p[0] / l, p[1] / l, p[2] / l).unwrap();
+    }
+    t.push_str("o scan\ng front\nusemtl skin\ns 1\n");
+    for (k, f) in s.f.iter().enumerate() {
+        if k == s.f.len() / 2 {
+            t.push_str("g back\nusemtl cloth\n");
+        }
+        let c = |i: usize| format!("{0}/{0}/{0}", i + 1);
+        writeln!(t, "f {} {} {}", c(f[0]), c(f[1]), c(f[2])).unwrap();
+    }
+    t
+}
+
+/// Faces whose centroid is above `z`.
+fn upper(s: &Soup, z: f64) -> Soup {
+    let f: Vec<[usize; 3]> =
+        s.f.iter()
+            .copied()
+            .filter(|f| f.iter().map(|&i| s.v[i][2]).sum::<f64>() / 3.0 > z)
+            .collect();
+    let (kept, _) = cut(&Soup { v: s.v.clone(), f }, [9.0, 9.0, 9.0], 0.0);
+    kept
+}
+
+#[test]
+fn obj_textured_round_trip_is_exact() {
+    let dir = tempdir();
+    let s = icosphere(2);
+    let src = dir.path().join("scan.obj");
+    std::fs::write(&src, textured_obj(&s)).unwrap();
+    let raw = io::read(&src, None).unwrap();
+    let obj = raw.attrs.obj.as_ref().unwrap();
+    assert_eq!(obj.mtllibs, ["scan.mtl"]);
+    assert_eq!(obj.states.len(), 3); // default, front/skin, back/cloth
+    let (out, report) = repair(&raw);
+    assert_eq!(report.summary.holes, 0);
+    same_attrs(&raw, &out);
+    let back = write_read(&out, dir.path(), "out.obj");
+    assert_eq!(back.attrs, raw.attrs);
+    let text = std::fs::read_to_string(dir.path().join("out.obj")).unwrap();
+    for line in [
+        "mtllib scan.mtl",
+        "usemtl skin",
+        "usemtl cloth",
+        "g back",
+        "s 1",
+        "o scan",
+    ] {
+        assert!(text.lines().any(|l| l == line), "{line} missing");
+    }
+}
+
+/// Twice the signed UV area of every face that has texture coordinates.
+fn uv_areas(m: &RawMesh) -> Vec<(usize, f64)> {
+    let uv = m.attrs.uv.as_ref().unwrap();
+    m.faces
+        .iter()
+        .enumerate()
+        .filter_map(|(k, _)| {
+            let i = uv.index[k]?;
+            let [a, b, c] = i.map(|i| uv.values[i as usize]);
+            Some((
+                k,
+                (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]),
+            ))
+        })
+        .collect()
+}
+
+#[test]
+fn sphere_cap_hole_gets_unflipped_uvs_and_the_neighbours_material() {
+    let dir = tempdir();
+    // the upper part of a sphere (UV = projection on the xy plane: one chart,
+    // every input UV triangle counter-clockwise), with a hole off the pole
+    let s = upper(&icosphere(4), 0.2);
+    let (s, _) = cut(&s, [0.35, 0.2, 0.915], 0.25);
+    let src = dir.path().join("cap.obj");
+    std::fs::write(&src, textured_obj(&s)).unwrap();
+    let raw = io::read(&src, None).unwrap();
+    assert!(uv_areas(&raw).iter().all(|&(_, a)| a > 0.0));
+    let (out, report) = repair(&raw);
+    // the rim of the cap is the outer border (skipped); the hole is filled
+    assert_eq!(report.summary.filled, 1, "{:?}", report.summary);
+    assert_eq!(
+        report.attributes.uv_patches.mapped, 1,
+        "{:?}",
+        report.attributes
+    );
+    let areas = uv_areas(&out);
+    assert_eq!(areas.len(), out.faces.len());
+    let flipped: Vec<_> = areas.iter().filter(|&&(_, a)| a <= 0.0).collect();
+    assert!(flipped.is_empty(), "flipped UV triangles: {flipped:?}");
+    // new faces take the state of the faces around the hole; every input face keeps
+    // its own
+    let o = out.attrs.obj.as_ref().unwrap();
+    assert_eq!(o.face_state.len(), out.faces.len());
+    let input_states = &raw.attrs.obj.as_ref().unwrap().face_state;
+    assert_eq!(&o.face_state[..raw.faces.len()], &input_states[..]);
+    // normals: every new face has them, unit
+    let n = out.attrs.normals.as_ref().unwrap();
+    for k in raw.faces.len()..out.faces.len() {
+        for i in n.index[k].unwrap() {
+            let v = n.values[i as usize];
+            let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            assert!((l - 1.0).abs() < 1e-9 && v[2] > 0.5, "{v:?}");
+        }
+    }
+}
+
+#[test]
+fn planar_grid_hole_uvs_and_colours_are_linear_within_bound() {
+    // a 20 x 20 grid of unit quads; UV = (x, y) / 20; colour = (x / 20, y / 20, 0.25 +
+    // (x + y) / 80), all linear; a round hole of radius 4 in the middle
+    let g = grid_soup(20);
+    let (s, _) = cut(&g, [10.0, 10.0, 0.0], 4.0);
+    let mut t = String::new();
+    for p in &s.v {
+        writeln!(
+            t,
+            "v {} {} {} {} {} {}",
+            p[0],
+            p[1],
+            p[2],
+            p[0] / 20.0,
+            p[1] / 20.0,
+            0.25 + (p[0] + p[1]) / 80.0
+        )
+        .unwrap();
+    }
+    for p in &s.v {
+        writeln!(t, "vt {} {}", p[0] / 20.0, p[1] / 20.0).unwrap();
+    }
+    for f in &s.f {
+        writeln!(t, "f {0}/{0} {1}/{1} {2}/{2}", f[0] + 1, f[1] + 1, f[2] + 1).unwrap();
+    }
+    let dir = tempdir();
+    let src = dir.path().join("grid.obj");
+    std::fs::write(&src, t).unwrap();
+    let raw = io::read(&src, None).unwrap();
+    let (out, report) = repair(&raw);
+    assert_eq!(report.summary.filled, 1, "{:?}", report.summary);
+    assert_eq!(
+        report.attributes.uv_patches.mapped, 1,
+        "{:?}",
+        report.attributes
+    );
+    let nv = raw.positions.len();
+    assert!(out.positions.len() > nv + 10);
+    // the bound: 1e-6 of the UV range (cotangent weights reproduce a linear field
+    // on a planar patch; the patch is planar to within the fill's tolerance)
+    let bound = 1e-6;
+    let colors = out.colors.as_ref().unwrap();
+    let uv = out.attrs.uv.as_ref().unwrap();
+    let mut worst: f64 = 0.0;
+    for v in nv..out.positions.len() {
+        let p = out.positions[v];
+        assert!(p.z.abs() < 1e-9, "patch not planar: {p}");
+        let want = [p.x / 20.0, p.y / 20.0, 0.25 + (p.x + p.y) / 80.0];
+        for k in 0..3 {
+            worst = worst.max((f64::from(colors[v][k]) - want[k]).abs() - 1e-7);
+        }
+    }
+    for (k, f) in out.faces.iter().enumerate().skip(raw.faces.len()) {
+        let idx = uv.index[k].expect("new face without UVs");
+        for c in 0..3 {
+            let p = out.positions[f[c] as usize];
+            let t = uv.values[idx[c] as usize];
+            worst = worst
+                .max((t[0] - p.x / 20.0).abs())
+                .max((t[1] - p.y / 20.0).abs());
+        }
+    }
+    assert!(
+        worst < bound,
+        "worst deviation from the linear field: {worst}"
+    );
+}
+
+/// A planar grid of `n` x `n` unit quads in z = 0.
+fn grid_soup(n: usize) -> Soup {
+    let mut s = Soup::default();
+    for j in 0..=n {
+        for i in 0..=n {
+            s.v.push([i as f64, j as f64, 0.0]);
+        }
+    }
+    let id = |i: usize, j: usize| j * (n + 1) + i;
+    for j in 0..n {
+        for i in 0..n {
+            if (i + j) % 2 == 0 {
+                s.f.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+                s.f.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+            } else {
+                s.f.push([id(i, j), id(i + 1, j), id(i, j + 1)]);
+                s.f.push([id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+    }
+    s
+}
+
+#[test]
+fn stl_header_and_attribute_bytes_are_carried() {
+    let dir = tempdir();
+    let (s, _) = cut(&icosphere(3), [0.0, 0.0, 1.0], 0.3);
+    let mut b = Vec::new();
+    let mut header = [0u8; 80];
+    let text = b"COLOR=\x10\x20\x30\xffMATERIAL=";
+    header[..text.len()].copy_from_slice(text);
+    b.extend_from_slice(&header);
+    b.extend_from_slice(&(s.f.len() as u32).to_le_bytes());
+    for (k, f) in s.f.iter().enumerate() {
+        b.extend_from_slice(&[0u8; 12]);
+        for &v in f {
+            for c in s.v[v] {
+                b.extend_from_slice(&(c as f32).to_le_bytes());
+            }
+        }
+        let attr: u16 = if k % 5 == 0 {
+            0x8000 | k as u16
+        } else {
+            0x7c1f
+        };
+        b.extend_from_slice(&attr.to_le_bytes());
+    }
+    let src = dir.path().join("c.stl");
+    std::fs::write(&src, &b).unwrap();
+    let raw = io::read(&src, None).unwrap();
+    let (out, report) = repair(&raw);
+    assert_eq!(report.summary.filled, 1);
+    let back = write_read(&out, dir.path(), "out.stl");
+    let st = back.attrs.stl.as_ref().unwrap();
+    assert_eq!(st.header, header);
+    let a0 = &raw.attrs.stl.as_ref().unwrap().attribute;
+    assert_eq!(&st.attribute[..a0.len()], &a0[..]);
+    // new facets: the most common attribute around the hole
+    assert!(st.attribute[a0.len()..].iter().all(|&a| a == 0x7c1f));
+}
+
+#[test]
+fn off_normals_colours_and_texture_coordinates_round_trip() {
+    let dir = tempdir();
+    let s = icosphere(1);
+    let mut t = format!("STCNOFF\n{} {} 0\n", s.v.len(), s.f.len());
+    for (i, p) in s.v.iter().enumerate() {
+        writeln!(
+            t,
+            "{} {} {} {} {} {} {} {} {} {} 0.{} 0.{}",
+            p[0],
+            p[1],
+            p[2],
+            p[0],
+            p[1],
+            p[2],
+            i * 9 % 256,
+            17,
+            200,
+            255,
+            i,
+            i + 1
+        )
+        .unwrap();
+    }
+    for f in &s.f {
+        writeln!(t, "3 {} {} {}", f[0], f[1], f[2]).unwrap();
+    }
+    let src = dir.path().join("n.off");
+    std::fs::write(&src, t).unwrap();
+    let raw = io::read(&src, None).unwrap();
+    assert_eq!(raw.attrs.vertex.len(), 9);
+    let (out, _) = repair(&raw);
+    let back = write_read(&out, dir.path(), "out.off");
+    assert_eq!(back.attrs, raw.attrs);
+    assert_eq!(back.colors, raw.colors);
+}
+
+#[test]
+fn dropped_attributes_are_named_with_the_reason() {
+    let s = icosphere(1);
+    let dir = tempdir();
+    let src = dir.path().join("scan.obj");
+    std::fs::write(&src, textured_obj(&s)).unwrap();
+    let raw = io::read(&src, None).unwrap();
+    let d = io::attrs::dropped(&raw, Format::Stl);
+    assert!(
+        d.iter()
+            .any(|d| d.what == "texture coordinates" && d.reason.starts_with("STL")),
+        "{d:?}"
+    );
+    assert!(d.iter().any(|d| d.what == "material library scan.mtl"));
+    assert!(io::attrs::dropped(&raw, Format::Obj).is_empty());
+}
+
+#[test]
+fn cli_log_has_the_attributes_section() {
+    let dir = tempdir();
+    let (s, _) = cut(&upper(&icosphere(3), 0.2), [0.35, 0.2, 0.915], 0.3);
+    let src = dir.path().join("scan.obj");
+    std::fs::write(&src, textured_obj(&s)).unwrap();
+    for (out, dropped) in [("out.obj", false), ("out.stl", true)] {
+        let o = dir.path().join(out);
+        let log = dir.path().join("log.json");
+        let r = run(&[
+            "fill",
+            src.to_str().unwrap(),
+            o.to_str().unwrap(),
+            "--report",
+            log.to_str().unwrap(),
+        ]);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        let j: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&log).unwrap()).unwrap();
+        let a = &j["attributes"];
+        assert!(
+            a["read"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .any(|x| x == "corner texture coordinates"),
+            "{a}"
+        );
+        assert!(a["interpolated"].as_array().unwrap().len() >= 2, "{a}");
+        let d = a["dropped"].as_array().unwrap();
+        assert_eq!(!d.is_empty(), dropped, "{a}");
+    }
+}
