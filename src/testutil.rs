@@ -50,8 +50,7 @@ pub fn cells_removed(raw: RawMesh, cut: impl Fn(usize, usize) -> bool) -> RawMes
 pub fn joined(mut a: RawMesh, b: &RawMesh) -> RawMesh {
     let base = a.positions.len() as u32;
     a.positions.extend_from_slice(&b.positions);
-    a.faces
-        .extend(b.faces.iter().map(|f| f.map(|v| v + base)));
+    a.faces.extend(b.faces.iter().map(|f| f.map(|v| v + base)));
     a
 }
 
@@ -60,7 +59,14 @@ pub fn joined(mut a: RawMesh, b: &RawMesh) -> RawMesh {
 /// turned by half a step, the triangles of a cell alternating with the ring (near
 /// equilateral triangles for `dz = 2π/seg · 0.866`); else every quad cut by the same
 /// diagonal, as [`grid`] does.
-pub fn cylinder(radius: f64, seg: usize, rings: usize, dz: f64, z0: f64, staggered: bool) -> RawMesh {
+pub fn cylinder(
+    radius: f64,
+    seg: usize,
+    rings: usize,
+    dz: f64,
+    z0: f64,
+    staggered: bool,
+) -> RawMesh {
     use std::f64::consts::TAU;
     let mut raw = RawMesh::default();
     for r in 0..rings {
@@ -240,24 +246,5 @@ pub fn sphere_cap_removed(level: usize, r: f64, dir: DVec3, cap: f64) -> RawMesh
             .normalize();
         c.dot(dir) < cap.cos()
     });
-    raw
-}
-
-/// A flat `n` x `n` grid of unit squares, two triangles each, facing +z: vertex
-/// `(i, j)` is `j * (n + 1) + i`, cell `(i, j)` is faces `2 (j n + i)` and `+ 1`.
-pub fn grid(n: usize) -> RawMesh {
-    let mut raw = RawMesh::default();
-    for j in 0..=n {
-        for i in 0..=n {
-            raw.positions.push(DVec3::new(i as f64, j as f64, 0.0));
-        }
-    }
-    let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
-    for j in 0..n {
-        for i in 0..n {
-            raw.faces.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-            raw.faces.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-        }
-    }
     raw
 }

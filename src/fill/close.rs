@@ -213,7 +213,7 @@ mod tests {
     /// L-shaped notch, and one rim vertex is lifted so that the loop is far from flat.
     #[test]
     fn closes_a_notched_loop_that_others_find_hard() {
-        let mut raw = crate::testutil::grid(6);
+        let mut raw = crate::testutil::grid(6, 0.0, 6.0, |_, _| 0.0);
         // remove cells (1..5, 1..3) and (1..3, 3..5): an L-shaped hole
         let cell = |i: usize, j: usize| j * 6 + i;
         let mut gone: Vec<usize> = Vec::new();

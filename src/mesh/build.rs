@@ -903,7 +903,7 @@ mod tests {
 
     /// A flat grid with `extra` flaps hinged on one interior edge (4 to 6 faces on it).
     fn grid_with_fan(extra: usize, connected: bool) -> RawMesh {
-        let mut raw = crate::testutil::grid(4);
+        let mut raw = crate::testutil::grid(4, 0.0, 4.0, |_, _| 0.0);
         // the interior edge 6-12 of the 5x5 vertex grid (the diagonal of cell (1,1))
         let (u, w) = (6u32, 12u32);
         for k in 0..extra {
@@ -943,7 +943,7 @@ mod tests {
     #[test]
     fn a_pinched_boundary_vertex_is_split() {
         // a grid with two holes touching at vertex 12 (cells (1,1) and (2,2))
-        let mut raw = crate::testutil::grid(4);
+        let mut raw = crate::testutil::grid(4, 0.0, 4.0, |_, _| 0.0);
         let cell = |i: usize, j: usize| j * 4 + i;
         let mut gone = [cell(1, 1), cell(2, 2)];
         gone.sort_unstable();

@@ -125,7 +125,7 @@ mod tests {
     /// rim is pulled across the hole, so the faces around it fold over the hole (the
     /// methods may or may not close it as it is; trimmed, it is a plain hole).
     fn folded_rim() -> RawMesh {
-        let mut raw = crate::testutil::grid(8);
+        let mut raw = crate::testutil::grid(8, 0.0, 8.0, |_, _| 0.0);
         let cell = |i: usize, j: usize| j * 8 + i;
         let mut gone: Vec<usize> = Vec::new();
         for j in 3..5 {
