@@ -87,6 +87,9 @@ pub struct HoleReport {
     pub reason: String,
     pub added_vertices: usize,
     pub added_faces: usize,
+    /// Input faces removed around the hole by rim trimming (`[rim]`) before it was
+    /// filled.
+    pub rim_faces_removed: usize,
     pub quality: Option<PatchQuality>,
     pub ms: f64,
 }

@@ -228,12 +228,22 @@ fn failed_holes_exit_2_with_output_written_and_reasons_logged() {
     write_obj(&inp, &s);
     let out = dir.path().join("o.obj");
     let rep = dir.path().join("o.json");
+    // without the last resorts (`close`, rim trimming), which would close it by
+    // removing the faces around it
+    let pol = dir.path().join("p.toml");
+    std::fs::write(
+        &pol,
+        "[dispatch]\nsmall = [\"fan\", \"min_area_fair\"]\n[rim]\ntrim = false\n",
+    )
+    .unwrap();
     let o = run(&[
         "fill",
         inp.to_str().unwrap(),
         out.to_str().unwrap(),
         "--report",
         rep.to_str().unwrap(),
+        "--policy",
+        pol.to_str().unwrap(),
     ]);
     assert_eq!(
         o.status.code(),

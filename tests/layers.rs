@@ -39,6 +39,7 @@ const LAYERS: &[&[&str]] = &[
         "fill::wavefront",
         "fill::hpde",
         "fill::lssvm_poisson",
+        "fill::close",
     ],
     &["fill::dispatch", "fill"],
     &["pipeline"],

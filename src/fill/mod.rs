@@ -3,6 +3,7 @@
 //! them ([`dispatch`]).
 
 pub mod advancing_front;
+pub mod close;
 pub mod dispatch;
 pub mod fan;
 pub mod hpde;

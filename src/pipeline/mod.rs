@@ -8,8 +8,9 @@ pub mod clean;
 
 use crate::check::Checker;
 use crate::fill::dispatch::{self, parallel};
+use crate::geometry::measure;
 use crate::io::RawMesh;
-use crate::mesh::{Mesh, VertexId};
+use crate::mesh::{FaceId, Mesh, VertexId};
 use crate::patch::Hole;
 use crate::policy::Policy;
 use crate::report::{Counts, HoleReport, HoleStatus, HoleTrace, RepairReport};
@@ -95,6 +96,7 @@ fn fill_all(
     degenerate: &mut usize,
     traces: &mut Vec<HoleTrace>,
 ) -> Vec<HoleReport> {
+    let input_faces = mesh.num_faces();
     let loops = mesh.topo.boundary_loops();
     let diag = mesh.bbox_diagonal();
     let holes: Vec<Hole> = loops
@@ -102,37 +104,59 @@ fn fill_all(
         .enumerate()
         .map(|(i, l)| Hole::new(i, mesh, l, policy))
         .collect();
-    // which holes to fill, and which rule skips the others: the rule as it applies to
-    // a component's longest loop; with `only_longest`, it then holds only for the
-    // longest loop of each component, which needs the components (a walk over every
-    // face) only when the rule would skip some loop
+    // which holes to fill, and which rule skips the others (the outer border of an
+    // open piece); with `only_longest` the rules hold only for the longest loop of
+    // each connected component. The components (a walk over every face) are needed
+    // for the area rule and for `only_longest` when some rule would skip a loop.
+    let b = &policy.border;
     let mut skip: Vec<Option<String>> = holes
         .iter()
         .map(|hole| border_rule(mesh, hole, policy, diag))
         .collect();
-    if policy.border.only_longest && skip.iter().any(Option::is_some) {
+    if b.min_area_share > 0.0 || (b.only_longest && skip.iter().any(Option::is_some)) {
         let comp = components(mesh);
-        let loop_comp: Vec<usize> = holes
+        let ncomp = comp.iter().copied().max().map_or(0, |m| m + 1);
+        let mut area = vec![0.0f64; ncomp];
+        let mut count = vec![0usize; ncomp];
+        for (f, &c) in comp.iter().enumerate() {
+            area[c] += mesh.face_normal_raw(FaceId::from_idx(f)).length() * 0.5;
+            count[c] += 1;
+        }
+        let loop_comp: Vec<Option<usize>> = holes
             .iter()
             .map(|h| {
                 h.vertices
                     .first()
                     .and_then(|&v| mesh.topo.anchor(v))
                     .map(|a| comp[a.face().idx()])
-                    .unwrap_or(usize::MAX)
             })
             .collect();
         // longest loop (by perimeter) of each component
-        let mut longest: std::collections::HashMap<usize, usize> = std::collections::HashMap::new();
+        let mut longest: Vec<Option<usize>> = vec![None; ncomp];
         for (i, h) in holes.iter().enumerate() {
-            let e = longest.entry(loop_comp[i]).or_insert(i);
-            if h.perimeter > holes[*e].perimeter {
-                *e = i;
+            if let Some(c) = loop_comp[i] {
+                if longest[c].is_none_or(|j| h.perimeter > holes[j].perimeter) {
+                    longest[c] = Some(i);
+                }
             }
         }
         for (i, s) in skip.iter_mut().enumerate() {
-            if longest.get(&loop_comp[i]) != Some(&i) {
+            let Some(c) = loop_comp[i] else { continue };
+            if b.only_longest && longest[c] != Some(i) {
                 *s = None;
+                continue;
+            }
+            if s.is_none() && b.min_area_share > 0.0 && area[c] > 0.0 {
+                let pts: Vec<_> = holes[i].vertices.iter().map(|&v| mesh.pos(v)).collect();
+                let share = measure::vector_area(&pts) / area[c];
+                if share >= b.min_area_share {
+                    *s = Some(format!(
+                        "outer border: the loop spans {share:.2} of the area of its piece \
+                         ({} faces) >= border.min_area_share = {} (an open surface, not a \
+                         hole in a closed one)",
+                        count[c], b.min_area_share
+                    ));
+                }
             }
         }
     }
@@ -172,6 +196,7 @@ fn fill_all(
                 reason: rule,
                 added_vertices: 0,
                 added_faces: 0,
+                rim_faces_removed: 0,
                 quality: None,
                 ms: 0.0,
             }),
@@ -183,7 +208,71 @@ fn fill_all(
             patch: first_face..(mesh.num_faces() as u32).max(first_face),
         });
     }
+    if policy.rim.trim {
+        trim_failed(mesh, &holes, &mut out, traces, policy, input_faces);
+    }
     out
+}
+
+/// The last step of the chain: every hole that failed, in hole order, gets its rim
+/// trimmed and the larger hole filled ([`dispatch::rim`]). A hole whose loop is no
+/// longer a boundary loop of the mesh (an earlier trim reached it) is left as it is
+/// reported.
+fn trim_failed(
+    mesh: &mut Mesh,
+    holes: &[Hole],
+    out: &mut [HoleReport],
+    traces: &mut [HoleTrace],
+    policy: &Policy,
+    input_faces: usize,
+) {
+    let mut input_faces = input_faces;
+    let mut avoid = vec![false; mesh.num_vertices()];
+    for (hole, rep) in holes.iter().zip(out.iter()) {
+        if rep.status == HoleStatus::Skipped {
+            for v in &hole.vertices {
+                avoid[v.idx()] = true;
+            }
+        }
+    }
+    for (i, (hole, rep)) in holes.iter().zip(out.iter_mut()).enumerate() {
+        if rep.status != HoleStatus::Failed || hole.len() < 3 {
+            continue;
+        }
+        // still a boundary loop of the mesh as it is now?
+        let open = hole
+            .vertices
+            .iter()
+            .all(|&v| mesh.topo.is_boundary_vertex(v));
+        if !open {
+            continue;
+        }
+        let t0 = Instant::now();
+        if let Some(t) = dispatch::rim::trim_and_fill(mesh, hole, policy, input_faces, &avoid) {
+            let mut tried = std::mem::take(&mut rep.tried);
+            tried.extend(t.report.tried.iter().cloned());
+            let ms = rep.ms;
+            *rep = t.report;
+            rep.tried = tried;
+            rep.reason = format!(
+                "filled after rim trimming: {} input faces removed, loop of {} boundary vertices",
+                t.removed, rep.boundary_vertices
+            );
+            rep.ms = ms + t0.elapsed().as_secs_f64() * 1000.0;
+            input_faces -= t.removed;
+            // rebuilding keeps face order: the patches (after the input faces) move
+            // down by the faces removed, and this hole's patch is the new tail
+            let before = (mesh.num_faces() - t.removed) as u32;
+            let shift = t.removed as u32;
+            for tr in traces.iter_mut() {
+                tr.patch = tr.patch.start.saturating_sub(shift)..tr.patch.end.saturating_sub(shift);
+            }
+            if let Some(tr) = traces.get_mut(i) {
+                tr.patch = before..(t.mesh.num_faces() as u32).max(before);
+            }
+            *mesh = t.mesh;
+        }
+    }
 }
 
 /// The outer-border rule for a loop that is the longest of its component (with
@@ -220,3 +309,6 @@ fn border_rule(mesh: &Mesh, hole: &Hole, policy: &Policy, diag: f64) -> Option<S
     }
     None
 }
+
+#[cfg(test)]
+mod tests;

@@ -20,6 +20,9 @@ pub enum Method {
     Wavefront,
     /// Prediction by differential evolution + constrained Delaunay (paper 000).
     Hpde,
+    /// Triangles over the loop's own vertices, checks relaxed to allow slivers: the
+    /// last method of every default list (not from a paper; `fill::close`).
+    Close,
 }
 
 /// Every method and its policy name, in the order the policy documents them.
@@ -30,6 +33,7 @@ pub const METHODS: &[(Method, &str)] = &[
     (Method::LssvmPoisson, "lssvm_poisson"),
     (Method::Wavefront, "wavefront"),
     (Method::Hpde, "hpde"),
+    (Method::Close, "close"),
 ];
 
 impl Method {
@@ -41,6 +45,7 @@ impl Method {
         METHODS[3].0,
         METHODS[4].0,
         METHODS[5].0,
+        METHODS[6].0,
     ];
     /// The policy spelling.
     pub fn name(self) -> &'static str {

@@ -84,6 +84,7 @@ pub struct Settings {
     pub dispatch: Dispatch,
     pub border: Border,
     pub clean: Clean,
+    pub rim: Rim,
     pub refine: Refine,
     pub fair: Fair,
     pub front: Front,

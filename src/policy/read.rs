@@ -24,9 +24,15 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
     ),
     (
         "border",
-        &["max_vertices", "max_bbox_share", "only_longest"],
+        &[
+            "max_vertices",
+            "max_bbox_share",
+            "min_area_share",
+            "only_longest",
+        ],
     ),
     ("clean", &["remove_teeth", "split_long_edges"]),
+    ("rim", &["trim", "max_rings", "max_faces"]),
     ("refine", &["density", "weight", "restricted_search_above"]),
     ("fair", &["continuity", "weights", "tangential_relax"]),
     (
@@ -327,9 +333,13 @@ impl Reader<'_> {
             ("dispatch", "large") => p.dispatch.large = self.methods(key, v)?,
             ("border", "max_vertices") => p.border.max_vertices = self.usize(key, v)?,
             ("border", "max_bbox_share") => p.border.max_bbox_share = self.float(key, v)?,
+            ("border", "min_area_share") => p.border.min_area_share = self.float(key, v)?,
             ("border", "only_longest") => p.border.only_longest = self.boolean(key, v)?,
             ("clean", "remove_teeth") => p.clean.remove_teeth = self.boolean(key, v)?,
             ("clean", "split_long_edges") => p.clean.split_long_edges = self.float(key, v)?,
+            ("rim", "trim") => p.rim.trim = self.boolean(key, v)?,
+            ("rim", "max_rings") => p.rim.max_rings = self.usize(key, v)?,
+            ("rim", "max_faces") => p.rim.max_faces = self.usize(key, v)?,
             ("refine", "density") => p.refine.density = self.float(key, v)?,
             ("refine", "weight") => p.refine.weight = self.named(key, v)?,
             ("refine", "restricted_search_above") => {

@@ -20,18 +20,20 @@ impl Default for Dispatch {
         Dispatch {
             small_max: 6,
             middle_max: 50,
-            small: vec![Method::Fan, Method::MinAreaFair],
+            small: vec![Method::Fan, Method::MinAreaFair, Method::Close],
             // chosen from the methods table (README): wavefront first is the most
             // accurate on middle and large bench holes, with the best triangles
             middle: vec![
                 Method::Wavefront,
                 Method::MinAreaFair,
                 Method::AdvancingFront,
+                Method::Close,
             ],
             large: vec![
                 Method::Wavefront,
                 Method::AdvancingFront,
                 Method::MinAreaFair,
+                Method::Close,
             ],
         }
     }
@@ -46,6 +48,11 @@ pub struct Border {
     /// Skip a loop whose bounding-box diagonal exceeds this share of the mesh's
     /// bounding-box diagonal (0: no limit).
     pub max_bbox_share: f64,
+    /// Skip a loop whose vector area is at least this share of the area of its
+    /// connected component (0: off): the border of an open surface spans about its
+    /// whole piece (a range image 0.5), a hole in a surface closed but for its holes
+    /// a small part of it (the bench's largest synthetic hole 0.14).
+    pub min_area_share: f64,
     /// Apply the rules only to the longest loop of each connected component.
     pub only_longest: bool,
 }
@@ -54,7 +61,8 @@ impl Default for Border {
     fn default() -> Self {
         Border {
             max_vertices: 0,
-            max_bbox_share: 0.6,
+            max_bbox_share: 0.0,
+            min_area_share: 0.25,
             only_longest: true,
         }
     }
@@ -76,6 +84,30 @@ impl Default for Clean {
         Clean {
             remove_teeth: false,
             split_long_edges: 0.0,
+        }
+    }
+}
+
+/// Rim trimming, the last step of the fallback chain (issue 17): when every method of
+/// a hole's list failed, the input faces around the loop are removed ring by ring and
+/// the larger hole filled. Changes input faces (each counted in the log).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct Rim {
+    /// Trim the rim of a hole every method failed on.
+    pub trim: bool,
+    /// Most rings of faces removed around one hole.
+    pub max_rings: usize,
+    /// Most input faces removed around one hole (0: no limit).
+    pub max_faces: usize,
+}
+
+impl Default for Rim {
+    fn default() -> Self {
+        Rim {
+            trim: true,
+            max_rings: 3,
+            max_faces: 500,
         }
     }
 }

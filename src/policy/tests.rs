@@ -629,7 +629,7 @@ prop_compose! {
         Settings {
             seed,
             dispatch: Dispatch { small_max, middle_max: small_max + extra, small, middle, large },
-            border: Border { max_vertices, max_bbox_share, only_longest },
+            border: Border { max_vertices, max_bbox_share, min_area_share: 0.25, only_longest },
             clean: Clean { remove_teeth, split_long_edges },
             refine: Refine { density, weight, restricted_search_above },
             fair: Fair { continuity, weights: fair_weights, tangential_relax: 100 },

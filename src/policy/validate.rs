@@ -95,6 +95,7 @@ impl Settings {
             ));
         }
         closed("border.max_bbox_share", b.max_bbox_share, 0.0, 10.0)?;
+        closed("border.min_area_share", b.min_area_share, 0.0, 1.0)?;
 
         let c = &self.clean;
         finite("clean.split_long_edges", c.split_long_edges)?;
@@ -102,6 +103,13 @@ impl Settings {
             return Err(Invalid::new(
                 "clean.split_long_edges",
                 format!("must be 0 (off) or at least 1 (got {})", c.split_long_edges),
+            ));
+        }
+
+        if !(1..=20).contains(&self.rim.max_rings) {
+            return Err(Invalid::new(
+                "rim.max_rings",
+                format!("must be between 1 and 20 (got {})", self.rim.max_rings),
             ));
         }
 

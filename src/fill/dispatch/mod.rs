@@ -8,9 +8,10 @@
 //! [`parallel`].
 
 pub mod parallel;
+pub mod rim;
 
 use super::kit::{relax, Deadline, FillContext, FillError};
-use super::{advancing_front, fan, hpde, lssvm_poisson, min_area_fair, wavefront};
+use super::{advancing_front, close, fan, hpde, lssvm_poisson, min_area_fair, wavefront};
 use crate::check::Checker;
 use crate::mesh::Mesh;
 use crate::patch::{apply_patch, Hole, Patch};
@@ -38,6 +39,7 @@ pub fn run_method_checked(
         Method::LssvmPoisson => lssvm_poisson::fill_checked(ctx),
         Method::Wavefront => wavefront::fill_checked(ctx),
         Method::Hpde => hpde::fill_checked(ctx),
+        Method::Close => close::fill_checked(ctx),
     }
 }
 
@@ -190,6 +192,7 @@ pub fn finish_hole(
         reason: String::new(),
         added_vertices: 0,
         added_faces: 0,
+        rim_faces_removed: 0,
         quality: None,
         ms: 0.0,
     };
