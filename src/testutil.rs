@@ -50,8 +50,7 @@ pub fn cells_removed(raw: RawMesh, cut: impl Fn(usize, usize) -> bool) -> RawMes
 pub fn joined(mut a: RawMesh, b: &RawMesh) -> RawMesh {
     let base = a.positions.len() as u32;
     a.positions.extend_from_slice(&b.positions);
-    a.faces
-        .extend(b.faces.iter().map(|f| f.map(|v| v + base)));
+    a.faces.extend(b.faces.iter().map(|f| f.map(|v| v + base)));
     a
 }
 
@@ -60,7 +59,14 @@ pub fn joined(mut a: RawMesh, b: &RawMesh) -> RawMesh {
 /// turned by half a step, the triangles of a cell alternating with the ring (near
 /// equilateral triangles for `dz = 2π/seg · 0.866`); else every quad cut by the same
 /// diagonal, as [`grid`] does.
-pub fn cylinder(radius: f64, seg: usize, rings: usize, dz: f64, z0: f64, staggered: bool) -> RawMesh {
+pub fn cylinder(
+    radius: f64,
+    seg: usize,
+    rings: usize,
+    dz: f64,
+    z0: f64,
+    staggered: bool,
+) -> RawMesh {
     use std::f64::consts::TAU;
     let mut raw = RawMesh::default();
     for r in 0..rings {

@@ -33,7 +33,11 @@ fn full_outbox_never_loses_the_input_and_resumes() {
         .status()
         .map(|s| s.success())
         .unwrap_or(false);
-    assert!(ok, "cannot mount a tmpfs on {} (the test needs root)", f.outbox.display());
+    assert!(
+        ok,
+        "cannot mount a tmpfs on {} (the test needs root)",
+        f.outbox.display()
+    );
     let _m = Mount(f.outbox.clone());
     let mut d = Daemon::ready(&f, &["--retry-max-secs", "1"], &[]);
     assert!(wait_until(Duration::from_secs(10), || f

@@ -132,7 +132,10 @@ fn tokens(src: &str) -> Vec<(Tok, usize)> {
         } else if ch == '"' {
             skip_str(&mut i, &mut line, false, 0);
         } else if (ch == 'r' || (ch == 'b' && c.get(i + 1) == Some(&'r')))
-            && matches!(c.get(i + if ch == 'b' { 2 } else { 1 }), Some('"') | Some('#'))
+            && matches!(
+                c.get(i + if ch == 'b' { 2 } else { 1 }),
+                Some('"') | Some('#')
+            )
         {
             // r"…", r#"…"#, br"…" (or the raw identifier r#name)
             let mut j = i + if ch == 'b' { 2 } else { 1 };
@@ -197,7 +200,12 @@ fn is_punct(t: Option<&(Tok, usize)>, ch: char) -> bool {
 
 /// The paths of a use tree (or of a plain path) starting at `toks[i]`, each appended to
 /// `prefix`; returns the index after it.
-fn tree(toks: &[(Tok, usize)], mut i: usize, mut prefix: Vec<String>, out: &mut Vec<Vec<String>>) -> usize {
+fn tree(
+    toks: &[(Tok, usize)],
+    mut i: usize,
+    mut prefix: Vec<String>,
+    out: &mut Vec<Vec<String>>,
+) -> usize {
     loop {
         match toks.get(i).map(|t| &t.0) {
             Some(Tok::Ident(s)) => {
@@ -223,7 +231,10 @@ fn tree(toks: &[(Tok, usize)], mut i: usize, mut prefix: Vec<String>, out: &mut 
                         Some(Tok::Ident(_)) | Some(Tok::Punct('{')) | Some(Tok::Punct('*'))
                             if depth == 0
                                 && (i == 0
-                                    || matches!(toks[i - 1].0, Tok::Punct('{') | Tok::Punct(','))) =>
+                                    || matches!(
+                                        toks[i - 1].0,
+                                        Tok::Punct('{') | Tok::Punct(',')
+                                    )) =>
                         {
                             i = tree(toks, i, prefix.clone(), out);
                         }
@@ -344,16 +355,17 @@ fn imports(src: &str, module: &[String], test_file: bool) -> Vec<Import> {
                     j += 2;
                 } else {
                     base = here.clone();
-                    while is_ident(toks.get(j), "super") && matches!(toks.get(j + 1), Some((Tok::PathSep, _))) {
+                    while is_ident(toks.get(j), "super")
+                        && matches!(toks.get(j + 1), Some((Tok::PathSep, _)))
+                    {
                         base.pop();
                         j += 2;
                     }
                 }
                 let mut paths = Vec::new();
                 let end = tree(&toks, j, base, &mut paths);
-                let test = test_file
-                    || stack.iter().any(|s| s.2)
-                    || test_use_until.is_some_and(|k| i < k);
+                let test =
+                    test_file || stack.iter().any(|s| s.2) || test_use_until.is_some_and(|k| i < k);
                 out.extend(paths.into_iter().map(|path| Import { line, path, test }));
                 i = end.max(i + 1);
                 continue;
@@ -416,7 +428,8 @@ fn library_files() -> Vec<(PathBuf, Vec<String>)> {
         .filter_map(|p| {
             let rel = p.strip_prefix(&src).unwrap().to_path_buf();
             let module = module_of(&rel);
-            let binary = rel == Path::new("main.rs") || module.first().is_some_and(|m| bin.contains(m));
+            let binary =
+                rel == Path::new("main.rs") || module.first().is_some_and(|m| bin.contains(m));
             (!binary).then_some((rel, module))
         })
         .collect()
@@ -426,7 +439,10 @@ fn library_files() -> Vec<(PathBuf, Vec<String>)> {
 fn violations() -> Vec<String> {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
     let files = library_files();
-    let top: BTreeSet<String> = files.iter().filter_map(|(_, m)| m.first().cloned()).collect();
+    let top: BTreeSet<String> = files
+        .iter()
+        .filter_map(|(_, m)| m.first().cloned())
+        .collect();
     let mut bad = Vec::new();
     for (rel, module) in &files {
         let from = if module.is_empty() {
@@ -452,7 +468,9 @@ fn violations() -> Vec<String> {
             let to = match place(&im.path) {
                 Some(p) => p,
                 // an item of lib.rs (the facade), or a module with no place
-                None if im.path.first().is_none_or(|s| !top.contains(s)) => (LAYERS.len(), String::new()),
+                None if im.path.first().is_none_or(|s| !top.contains(s)) => {
+                    (LAYERS.len(), String::new())
+                }
                 None => {
                     bad.push(format!(
                         "src/{}:{}: crate::{} has no place in the layers",
@@ -492,7 +510,12 @@ fn violations() -> Vec<String> {
 #[test]
 fn imports_point_to_earlier_layers_only() {
     let bad = violations();
-    assert!(bad.is_empty(), "{} imports break the layers:\n{}", bad.len(), bad.join("\n"));
+    assert!(
+        bad.is_empty(),
+        "{} imports break the layers:\n{}",
+        bad.len(),
+        bad.join("\n")
+    );
 }
 
 /// The reader finds what it must: a use tree, `super` paths, inline test modules, and
@@ -513,7 +536,11 @@ fn the_reader_finds_paths_in_code_only() {
             use crate::testutil::icosphere;
         }
     "##;
-    let module = vec!["fill".to_string(), "wavefront".to_string(), "wave".to_string()];
+    let module = vec![
+        "fill".to_string(),
+        "wavefront".to_string(),
+        "wave".to_string(),
+    ];
     let got: Vec<(String, bool)> = imports(src, &module, false)
         .into_iter()
         .map(|im| (im.path.join("::"), im.test))
@@ -532,6 +559,9 @@ fn the_reader_finds_paths_in_code_only() {
     .collect();
     assert_eq!(got, want);
     assert_eq!(place(&module).unwrap().1, "fill::wavefront");
-    assert_eq!(place(&["fill".into(), "kit".into(), "x".into()]).unwrap().1, "fill::kit");
+    assert_eq!(
+        place(&["fill".into(), "kit".into(), "x".into()]).unwrap().1,
+        "fill::kit"
+    );
     assert!(place(&["nowhere".into()]).is_none());
 }

@@ -92,7 +92,10 @@ fn topology_rejects_open_and_misoriented_patches() {
     };
     let e = check_topology(&m, &l, &ear()).unwrap_err();
     assert!(
-        matches!(e, CheckFailure::Topology(TopologyFailure::ChordIsMeshEdge(..))),
+        matches!(
+            e,
+            CheckFailure::Topology(TopologyFailure::ChordIsMeshEdge(..))
+        ),
         "{e}"
     );
     // the ear at the convex corner (2,2) is fine

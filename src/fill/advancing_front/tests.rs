@@ -136,7 +136,6 @@ fn sphere_with_hole(level: usize, cap: f64) -> (Mesh, Vec<VertexId>) {
     (mesh, lp)
 }
 
-
 // ----- running and checking ---------------------------------------------------------
 
 fn run(mesh: &Mesh, lp: &[VertexId], policy: &Policy) -> (Hole, Result<Patch, FillError>) {

@@ -17,7 +17,9 @@ fn v(x: f64, y: f64, z: f64) -> DVec3 {
 
 /// An `n x n` sheet of unit cells at height `z` without the cells `removed` (i, j).
 fn sheet(n: usize, z: f64, removed: &[(usize, usize)]) -> RawMesh {
-    cells_removed(grid(n, 0.0, n as f64, |_, _| z), |i, j| removed.contains(&(i, j)))
+    cells_removed(grid(n, 0.0, n as f64, |_, _| z), |i, j| {
+        removed.contains(&(i, j))
+    })
 }
 
 /// The 2 x 2 cells of the sheets' hole.
@@ -167,9 +169,8 @@ fn dispatcher_fills_a_large_hole_with_the_front() {
 #[test]
 fn dispatcher_accepts_hpde_patches() {
     let policy = only(Method::Hpde);
-    let sphere = |level, cap| {
-        mesh_and_loop(&sphere_cap_removed(level, 1.0, DVec3::Z, cap), |_, _| true)
-    };
+    let sphere =
+        |level, cap| mesh_and_loop(&sphere_cap_removed(level, 1.0, DVec3::Z, cap), |_, _| true);
     for (mut mesh, lp) in [
         sphere(3, 0.75),
         sphere(4, 1.1),

@@ -250,7 +250,8 @@ impl Local {
             let mut touched = vec![false; self.tris.len()];
             let keys: Vec<(u32, u32)> = de.keys().copied().collect();
             // undirected edges, kept current as swaps happen
-            let mut edges: BTreeSet<(u32, u32)> = keys.iter().map(|&(a, b)| edge_key(a, b)).collect();
+            let mut edges: BTreeSet<(u32, u32)> =
+                keys.iter().map(|&(a, b)| edge_key(a, b)).collect();
             for (a, b) in keys {
                 if a > b {
                     continue;

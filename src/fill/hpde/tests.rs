@@ -66,9 +66,11 @@ fn height_grid(
 /// Unit icosphere (`level` subdivisions) with the faces whose centroid direction lies
 /// within `cap` radians of +z removed.
 fn icosphere_with_hole(level: usize, cap: f64) -> (Mesh, Vec<VertexId>) {
-    build(&testutil::sphere_cap_removed(level, 1.0, DVec3::Z, cap), |_| true)
+    build(
+        &testutil::sphere_cap_removed(level, 1.0, DVec3::Z, cap),
+        |_| true,
+    )
 }
-
 
 // ----- running and checking ---------------------------------------------------------
 

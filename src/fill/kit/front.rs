@@ -83,7 +83,13 @@ mod tests {
     #[test]
     fn smallest_key_first_then_node_then_version() {
         let mut q = FrontQueue::new();
-        for (key, node, version) in [(2.0, 1, 0), (1.0, 3, 1), (1.0, 2, 5), (1.0, 2, 4), (f64::NAN, 0, 0)] {
+        for (key, node, version) in [
+            (2.0, 1, 0),
+            (1.0, 3, 1),
+            (1.0, 2, 5),
+            (1.0, 2, 4),
+            (f64::NAN, 0, 0),
+        ] {
             q.push(Entry {
                 key,
                 node,

@@ -516,8 +516,7 @@ mod tests {
             policy.fair.tangential_relax,
             RELAX_STEP,
         );
-        let (got, q) =
-            first_passing_at(&ctx, &variants, |_, c| kit_fill(c)).unwrap();
+        let (got, q) = first_passing_at(&ctx, &variants, |_, c| kit_fill(c)).unwrap();
         assert_eq!(got, good);
         assert_eq!(
             q,

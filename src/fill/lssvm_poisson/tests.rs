@@ -44,7 +44,6 @@ fn grid(n: usize) -> RawMesh {
     testutil::grid(n, 0.0, n as f64, |_, _| 0.0)
 }
 
-
 /// Open unit cylinder about the z axis, `around` vertices a ring, `rows` rows of
 /// near-equilateral triangles.
 fn cylinder(around: usize, rows: usize) -> RawMesh {

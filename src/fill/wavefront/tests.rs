@@ -17,7 +17,6 @@ fn grid_hole(n: usize, r: f64, z: impl Fn(f64, f64) -> f64) -> RawMesh {
     })
 }
 
-
 /// An open cylinder of radius `rad` around z, `nt` columns, `nz` rows of height
 /// `h`, faces outward, with the faces whose centroid is within `r` of `(rad, 0, 0)`
 /// removed.
@@ -26,7 +25,6 @@ fn cylinder_hole(rad: f64, nt: usize, nz: usize, h: f64, r: f64) -> RawMesh {
     let hc = DVec3::new(rad, 0.0, 0.0);
     testutil::cut_faces(raw, |c| (c - hc).length() <= r)
 }
-
 
 fn run(mesh: &Mesh, l: Vec<VertexId>, policy: &Policy) -> (Hole, Result<Patch, FillError>) {
     crate::fill::kit::run_on(mesh, l, policy, fill)

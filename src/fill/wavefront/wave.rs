@@ -141,7 +141,6 @@ pub(super) fn inside_or_near(poly: &[(f64, f64)], p: (f64, f64), near: f64) -> b
     false
 }
 
-
 /// Weight ω = λ / G (Eqs. 2, 4) and unit normal of triangle (a, b, c) seen from corner `q`.
 pub(super) fn face_weight(q: DVec3, a: DVec3, b: DVec3, c: DVec3) -> Option<(f64, DVec3)> {
     let n = (b - a).cross(c - a);
