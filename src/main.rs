@@ -1,7 +1,9 @@
-//! The `holefill` command: `fill` (one-shot), `check-policy`, `watch` (the daemon).
+//! The `holefill` command: `fill` (one-shot), `check-policy`, `watch` (the daemon),
+//! `worker`, `submit`, `results` (the NATS work queue).
 #![forbid(unsafe_code)]
 
 mod daemon;
+mod worker;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -52,6 +54,12 @@ enum Cmd {
     },
     /// Watch an inbox and repair every mesh dropped into it (the daemon).
     Watch(daemon::WatchArgs),
+    /// Repair scans from a NATS JetStream work queue (see docs/worker.md).
+    Worker(worker::WorkerArgs),
+    /// Upload meshes and put them on the work queue.
+    Submit(worker::SubmitArgs),
+    /// Download the finished scans of the work queue into a folder.
+    Results(worker::ResultsArgs),
 }
 
 #[derive(clap::Args)]
@@ -119,6 +127,20 @@ fn main() -> ExitCode {
                 ExitCode::from(exit::CONFIG)
             }
         },
+        Cmd::Worker(args) => queue_exit(worker::run_worker(args)),
+        Cmd::Submit(args) => queue_exit(worker::run_submit(args)),
+        Cmd::Results(args) => queue_exit(worker::run_results(args)),
+    }
+}
+
+/// Exit status of the queue commands: 0, or 1 with the error.
+fn queue_exit(r: anyhow::Result<()>) -> ExitCode {
+    match r {
+        Ok(()) => ExitCode::from(exit::OK),
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(exit::USAGE)
+        }
     }
 }
 

@@ -447,7 +447,6 @@ impl Checker {
         against_base: bool,
         given: Option<&[u32]>,
     ) -> Result<(), CheckFailure> {
-        let k = hole.len();
         if patch.triangles.is_empty() {
             return Ok(());
         }
@@ -463,15 +462,7 @@ impl Checker {
         if !against_base && near.is_empty() {
             return Ok(());
         }
-        let keys: Vec<u64> = (0..pos.len())
-            .map(|i| {
-                if i < k {
-                    vertex_key(mesh, hole[i])
-                } else {
-                    NEW_KEY + (i - k) as u64
-                }
-            })
-            .collect();
+        let keys = patch_keys(mesh, hole, pos.len());
         let tris: Vec<([DVec3; 3], [u64; 3])> = patch
             .triangles
             .iter()
@@ -563,6 +554,21 @@ pub(super) fn vertex_key(mesh: &Mesh, v: VertexId) -> u64 {
         }
     }
     v.idx() as u64
+}
+
+/// The keys of the `n` patch vertices over the loop `hole`: [`vertex_key`] for the
+/// loop's, [`NEW_KEY`] on for the new ones.
+pub(super) fn patch_keys(mesh: &Mesh, hole: &[VertexId], n: usize) -> Vec<u64> {
+    let k = hole.len();
+    (0..n)
+        .map(|i| {
+            if i < k {
+                vertex_key(mesh, hole[i])
+            } else {
+                NEW_KEY + (i - k) as u64
+            }
+        })
+        .collect()
 }
 
 /// Corners and vertex keys of mesh face `f` (`None` when out of range).

@@ -10,7 +10,7 @@
 //! patch triangles, then the smallest patch triangle meeting a mesh face, with the
 //! smallest such face.
 
-use super::checker::{face_tri, vertex_key, NEW_KEY};
+use super::checker::{face_tri, patch_keys};
 use super::quality::degenerate_reason;
 use super::{
     check_topology, patch_positions, quality, CheckFailure, Degeneracy, Meets, TopologyFailure,
@@ -97,7 +97,6 @@ impl<'a> PatchChecks<'a> {
         if hole.iter().any(|v| v.idx() >= mesh.num_vertices()) {
             return None;
         }
-        let k = hole.len();
         let pos = patch_positions(mesh, hole, &patch);
         if patch
             .triangles
@@ -106,15 +105,7 @@ impl<'a> PatchChecks<'a> {
         {
             return None;
         }
-        let keys: Vec<u64> = (0..pos.len())
-            .map(|i| {
-                if i < k {
-                    vertex_key(mesh, hole[i])
-                } else {
-                    NEW_KEY + (i - k) as u64
-                }
-            })
-            .collect();
+        let keys = patch_keys(mesh, hole, pos.len());
         let mut s = PatchChecks {
             mesh,
             hole,

@@ -66,6 +66,10 @@ pub struct FileConfig {
     pub on_success: Option<OnSuccess>,
     pub collision: Option<Collision>,
     pub log_format: Option<LogFormat>,
+    /// Forward claimed files to this NATS server's work queue (`watch --forward`).
+    pub forward: Option<String>,
+    /// The queue (`holefill worker`, `submit`, `results`): see crate::worker::config.
+    pub nats: Option<crate::worker::config::NatsFile>,
 }
 
 impl FileConfig {
@@ -121,6 +125,10 @@ pub struct Settings {
     pub on_success: OnSuccess,
     pub collision: Collision,
     pub log_format: LogFormat,
+    /// `Some(url)`: the gateway (repairs on the work queue at `url`).
+    pub forward: Option<String>,
+    /// The queue's names and settings (the config's `[nats]` section).
+    pub nats: crate::worker::config::NatsFile,
 }
 
 impl Settings {
@@ -161,7 +169,10 @@ impl Settings {
             .or_else(|| file.archive.clone())
             .unwrap_or_else(|| sibling("archive"));
         let inbox = inbox.unwrap_or_else(|| PathBuf::from("./inbox"));
-        let workers = match args.workers.or(file.workers).unwrap_or(0) {
+        let forward = args.forward.clone().or_else(|| file.forward.clone());
+        // a gateway's workers are files in flight on the queue, not local children
+        let default_workers = if forward.is_some() { 64 } else { 0 };
+        let workers = match args.workers.or(file.workers).unwrap_or(default_workers) {
             0 => std::thread::available_parallelism()
                 .map(|n| n.get())
                 .unwrap_or(1),
@@ -219,6 +230,8 @@ impl Settings {
                 .log_format
                 .or(file.log_format)
                 .unwrap_or(LogFormat::Text),
+            forward,
+            nats: file.nats.clone().unwrap_or_default(),
         };
         s.validate()?;
         Ok(s)
@@ -266,6 +279,12 @@ impl Settings {
         if self.log_format != new.log_format {
             v.push("log_format");
         }
+        if self.forward != new.forward {
+            v.push("forward");
+        }
+        if self.nats != new.nats {
+            v.push("nats");
+        }
         v
     }
 
@@ -279,6 +298,8 @@ impl Settings {
             workers: self.workers,
             poll: self.poll,
             log_format: self.log_format,
+            forward: self.forward.clone(),
+            nats: self.nats.clone(),
             ..new.clone()
         }
     }
@@ -369,6 +390,7 @@ mod tests {
             "on_success",
             "collision",
             "log_format",
+            "forward",
         ] {
             // `## ` lines are prose, `# key = value` lines are the documented keys
             let uncommented: String = text

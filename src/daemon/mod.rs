@@ -26,10 +26,11 @@
 //! Every file name that reaches the journal goes through [`fsops::shown`]: one line of
 //! printable text, whatever bytes the name holds.
 
+pub mod child;
 mod claim;
-mod config;
-mod fsops;
-mod hooks;
+pub mod config;
+pub mod fsops;
+pub mod hooks;
 mod queue;
 mod sniff;
 mod watch;
@@ -127,6 +128,10 @@ pub struct WatchArgs {
     /// Journal format on stderr [default: text].
     #[arg(long, value_enum)]
     pub log_format: Option<LogFormat>,
+    /// Forward the claimed files to this NATS work queue (nats://HOST:PORT) instead of
+    /// repairing them here, and publish the results that come back (docs/worker.md).
+    #[arg(long)]
+    pub forward: Option<String>,
 }
 
 /// Runs the daemon until SIGTERM or SIGINT (then returns `Ok` once every claimed file
@@ -275,7 +280,7 @@ impl Daemon {
                 layout.processing_root.display()
             )
         })?);
-        worker::probe_limits(settings.memory_limit_mb)?;
+        child::probe_limits(settings.memory_limit_mb)?;
         let (policy, policy_text) = snapshot_policy(&settings, &home.tmp, 0)?;
         let exe = std::env::current_exe().context("cannot find the holefill executable")?;
         let cores = std::thread::available_parallelism()
@@ -285,7 +290,22 @@ impl Daemon {
         if let Some(w) = hooks.warning() {
             tracing::warn!("{w}");
         }
+        let forward = match &settings.forward {
+            Some(url) => Some(
+                crate::worker::gateway::Forwarder::start(
+                    url,
+                    settings.nats.names()?,
+                    settings.nats.settings()?,
+                    &id.host,
+                    Duration::from_secs(30),
+                )
+                .await
+                .with_context(|| format!("--forward {url}"))?,
+            ),
+            None => None,
+        };
         let ctx = Arc::new(RunCtx {
+            forward,
             layout: layout.clone(),
             host: id.host.clone(),
             pid: id.pid,
@@ -1004,7 +1024,7 @@ impl Daemon {
             );
         }
         let new = self.settings.reloaded(&new);
-        if let Err(e) = worker::probe_limits(new.memory_limit_mb) {
+        if let Err(e) = child::probe_limits(new.memory_limit_mb) {
             tracing::error!("SIGHUP: the config is refused, the old one kept: {e:#}");
             return;
         }
@@ -1028,6 +1048,7 @@ impl Daemon {
             exe: self.ctx.exe.clone(),
             hooks: self.ctx.hooks.clone(),
             cores: self.ctx.cores,
+            forward: self.ctx.forward.clone(),
         });
         self.settings = new;
         tracing::info!(policy = ?self.settings.policy, "SIGHUP: config and policy reloaded");

@@ -12,16 +12,8 @@
 //! the repair the open file is checked again: a file that changed meanwhile (a writer
 //! still at work) is put back to settle, its output discarded.
 //!
-//! **Isolation.** Each repair is a child process (the daemon's own executable), so a
-//! crash, a runaway allocation or a hang is contained. The memory limit is the child's
-//! address space (`RLIMIT_AS`); setting it takes `pre_exec` or `setrlimit`, both
-//! `unsafe`, which the crate forbids, so the child is started through `/bin/sh -c
-//! 'ulimit -v KB; ulimit -t CPU; exec "$0" "$@"' holefill fill ...` (the shell sets the
-//! limits on itself and replaces itself by `holefill`). The wall-clock limit is the
-//! daemon's: past it the child's process group is killed. Each child has a process
-//! group of its own, so a Ctrl-C on the daemon's terminal does not kill the repairs the
-//! daemon lets finish, and raises its own `oom_score_adj` to 1000, so that under memory
-//! pressure the kernel kills a worker (a failed attempt) rather than the daemon.
+//! **Isolation.** Each repair is a child process under limits ([`super::child`], shared
+//! with the queue worker), in a process group of its own.
 //!
 //! Exit statuses of `holefill fill`: 0 and 2 (some holes left open) are repairs; 65
 //! (malformed input) and 70 (internal error) are permanent failures; 74 (I/O, such as
@@ -43,6 +35,7 @@
 //! leaves the job where it is and is retried later; the log, which says the original
 //! is archived, is published only once it is.
 
+use super::child::{self, ChildEnd};
 use super::claim::{self, Job, Layout, Phase};
 use super::config::{Collision, OnSuccess, Settings};
 use super::fsops::{self, FileId, Stamp};
@@ -53,10 +46,8 @@ use std::ffi::OsString;
 use std::fs;
 use std::io;
 use std::path::{Path, PathBuf};
-use std::process::Stdio;
 use std::sync::Arc;
-use std::time::{Duration, Instant, SystemTime};
-use tokio::io::AsyncReadExt;
+use std::time::{Instant, SystemTime};
 use tokio::sync::watch;
 
 /// What every job of one configuration generation shares.
@@ -74,6 +65,25 @@ pub struct RunCtx {
     pub exe: PathBuf,
     pub hooks: Hooks,
     pub cores: usize,
+    /// `watch --forward`: repairs go to the work queue instead of a local child.
+    pub forward: Option<Arc<crate::worker::gateway::Forwarder>>,
+}
+
+impl RunCtx {
+    /// How this generation's children are started.
+    pub fn child_spec(&self) -> child::Spec<'_> {
+        child::Spec {
+            exe: &self.exe,
+            policy: self.policy.as_deref(),
+            max_file_bytes: self.settings.max_file_bytes,
+            max_faces: self.settings.max_faces,
+            max_vertices: self.settings.max_vertices,
+            time_limit: self.settings.time_limit,
+            memory_limit_mb: self.settings.memory_limit_mb,
+            cores: self.cores,
+            hooks: &self.hooks,
+        }
+    }
 }
 
 /// How a job ended.
@@ -130,16 +140,6 @@ impl Done {
     }
 }
 
-/// How the child ended.
-#[derive(Debug)]
-enum ChildEnd {
-    Exit(i32),
-    Signal(i32),
-    Timeout(Duration),
-    Cancelled,
-    SpawnError(io::Error),
-}
-
 /// When this attempt started.
 #[derive(Clone, Copy, Debug)]
 struct Times {
@@ -176,9 +176,27 @@ pub async fn process(ctx: Arc<RunCtx>, job: Job, mut cancel: watch::Receiver<boo
     let child_log = job.tmp(".child.json");
     let _ = fs::remove_file(&out);
     let _ = fs::remove_file(&child_log);
-    let (end, stderr) = run_child(&ctx, &job, &file, &ext, &out, &child_log, &mut cancel).await;
+    let (end, stderr) = match &ctx.forward {
+        // the gateway: repaired by a queue worker, its outcome written as the child's
+        Some(f) => {
+            f.repair(&job.name.to_string_lossy(), &file, &out, &child_log, &mut cancel)
+                .await
+        }
+        None => {
+            child::run(
+                &ctx.child_spec(),
+                &job.name.to_string_lossy(),
+                child::Input::Stdin(&file),
+                &ext,
+                &out,
+                &child_log,
+                &mut cancel,
+            )
+            .await
+        }
+    };
     let shown_input = fsops::shown(ctx.layout.inbox.join(&job.name).as_os_str());
-    let msg = stderr_message(&stderr).replace("/proc/self/fd/0", &shown_input);
+    let msg = child::stderr_message(&stderr).replace("/proc/self/fd/0", &shown_input);
     // a writer still at work through an open descriptor: its output is of a partial file
     let changed = file.metadata().map(|m| Stamp::of(&m)).ok() != Some(stamp);
     drop(file);
@@ -247,12 +265,18 @@ pub async fn process(ctx: Arc<RunCtx>, job: Job, mut cancel: watch::Receiver<boo
             })
             .await
         }
+        ChildEnd::Remote { stage, error } => {
+            blocking(c2, move |c| {
+                fail(&c, job, t, &stage, error, read_json(&child_log), None, true)
+            })
+            .await
+        }
         ChildEnd::SpawnError(e) => {
             let e = format!("cannot start the worker: {e}");
             blocking(c2, move |c| put_back(&c, job, Some(e), false)).await
         }
         end => {
-            let why = crash_reason(&ctx, end, &msg);
+            let why = child::crash_reason(ctx.settings.memory_limit_mb, end, &msg);
             let _ = fs::remove_file(&out);
             let _ = fs::remove_file(&child_log);
             if job.attempt >= ctx.settings.max_attempts {
@@ -265,31 +289,6 @@ pub async fn process(ctx: Arc<RunCtx>, job: Job, mut cancel: watch::Receiver<boo
                 Done::Again { job, error: why }
             }
         }
-    }
-}
-
-fn crash_reason(ctx: &RunCtx, end: ChildEnd, msg: &str) -> String {
-    let tail = if msg.is_empty() {
-        String::new()
-    } else {
-        format!(": {msg}")
-    };
-    match end {
-        ChildEnd::Timeout(d) => format!("time limit of {} s exceeded: worker killed", d.as_secs()),
-        ChildEnd::Signal(sig) if msg.contains("memory allocation") => format!(
-            "memory limit of {} MiB exceeded: worker died (signal {sig}){tail}",
-            ctx.settings.memory_limit_mb
-        ),
-        ChildEnd::Signal(sig) if ctx.settings.memory_limit_mb > 0 && matches!(sig, 6 | 11) => {
-            format!(
-                "worker killed by signal {sig} (an allocation past memory_limit_mb = {} MiB?){tail}",
-                ctx.settings.memory_limit_mb
-            )
-        }
-        ChildEnd::Signal(sig) => format!("worker killed by signal {sig}{tail}"),
-        ChildEnd::Exit(125) => "the worker's limits could not be applied (ulimit)".to_string(),
-        ChildEnd::Exit(code) => format!("worker crashed (exit {code}){tail}"),
-        _ => "worker ended".to_string(),
     }
 }
 
@@ -481,192 +480,6 @@ fn reject_special(ctx: &RunCtx, job: Job, t: Times, md: &fs::Metadata) -> Done {
     let err =
         format!("not a regular file: {what}; it was neither opened nor followed, and is removed");
     fail(ctx, job, t, "input", err, None, None, false)
-}
-
-/// The shell script that applies the limits (and test hooks) and execs the worker.
-fn wrapper_script(ctx: &RunCtx, name: &str) -> String {
-    // the worker, not the daemon, is the kernel's OOM killer's first choice
-    let mut script = String::from("{ echo 1000 > /proc/self/oom_score_adj; } 2>/dev/null; ");
-    if ctx.settings.memory_limit_mb > 0 {
-        script.push_str(&format!(
-            "ulimit -v {} || exit 125; ",
-            ctx.settings.memory_limit_mb.saturating_mul(1024)
-        ));
-    }
-    if let Some(t) = ctx.settings.time_limit {
-        // CPU seconds: every core busy for the whole wall-clock limit, plus a margin
-        let cpu = t
-            .as_secs()
-            .saturating_mul(ctx.cores.max(1) as u64)
-            .saturating_add(60);
-        script.push_str(&format!("ulimit -t {cpu} 2>/dev/null; "));
-    }
-    script.push_str(&ctx.hooks.worker_prefix(name));
-    script.push_str("exec \"$0\" \"$@\"");
-    script
-}
-
-/// Checks that the shell can apply the configured limits.
-pub fn probe_limits(memory_limit_mb: u64) -> anyhow::Result<()> {
-    if memory_limit_mb == 0 {
-        return Ok(());
-    }
-    let st = std::process::Command::new("/bin/sh")
-        .arg("-c")
-        .arg(format!(
-            "ulimit -v {}",
-            memory_limit_mb.saturating_mul(1024)
-        ))
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status()
-        .map_err(|e| anyhow::anyhow!("/bin/sh is needed to start workers under limits: {e}"))?;
-    if !st.success() {
-        anyhow::bail!("memory_limit_mb = {memory_limit_mb} cannot be applied (ulimit -v refused; above the hard limit?)");
-    }
-    Ok(())
-}
-
-async fn run_child(
-    ctx: &RunCtx,
-    job: &Job,
-    input: &fs::File,
-    ext: &str,
-    out: &Path,
-    log: &Path,
-    cancel: &mut watch::Receiver<bool>,
-) -> (ChildEnd, Vec<u8>) {
-    let stdin = match input.try_clone() {
-        Ok(f) => f,
-        Err(e) => return (ChildEnd::SpawnError(e), Vec::new()),
-    };
-    let name = job.name.to_string_lossy();
-    let mut cmd = tokio::process::Command::new("/bin/sh");
-    cmd.arg("-c").arg(wrapper_script(ctx, &name)).arg(&ctx.exe);
-    cmd.arg("fill")
-        .arg("/proc/self/fd/0")
-        .arg(out)
-        .arg("--input-format")
-        .arg(ext)
-        .arg("--report")
-        .arg(log)
-        .arg("--quiet");
-    if let Some(p) = &ctx.policy {
-        cmd.arg("--policy").arg(p);
-    }
-    // the read limits, enforced by the reader too: the header sniff cannot count
-    // vertices, nor triangles of fanned polygons
-    let s = &ctx.settings;
-    for (flag, value) in [
-        ("--max-file-bytes", s.max_file_bytes),
-        ("--max-faces", s.max_faces),
-        ("--max-vertices", s.max_vertices),
-    ] {
-        if value > 0 {
-            cmd.arg(flag).arg(value.to_string());
-        }
-    }
-    cmd.stdin(Stdio::from(stdin))
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .env_remove("NOTIFY_SOCKET")
-        .env_remove("WATCHDOG_USEC")
-        .env_remove("WATCHDOG_PID")
-        .env_remove("HOLEFILL_TEST_SLOW")
-        .env_remove("HOLEFILL_TEST_CRASH_ON")
-        .env_remove("HOLEFILL_TEST_DIE_AT")
-        .env_remove("HOLEFILL_TEST_PAUSE_AT")
-        .process_group(0)
-        .kill_on_drop(true);
-    let mut child = match cmd.spawn() {
-        Ok(c) => c,
-        Err(e) => return (ChildEnd::SpawnError(e), Vec::new()),
-    };
-    let pid = child.id();
-    // keep only the tail of stderr, however much the worker writes
-    let reader = child.stderr.take().map(|mut err| {
-        tokio::spawn(async move {
-            let mut tail: Vec<u8> = Vec::new();
-            let mut buf = [0u8; 4096];
-            loop {
-                match err.read(&mut buf).await {
-                    Ok(0) | Err(_) => break,
-                    Ok(n) => {
-                        tail.extend_from_slice(&buf[..n]);
-                        if tail.len() > 8192 {
-                            tail.drain(..tail.len() - 4096);
-                        }
-                    }
-                }
-            }
-            tail
-        })
-    });
-    let limit = ctx.settings.time_limit;
-    let sleep = async {
-        match limit {
-            Some(d) => tokio::time::sleep(d).await,
-            None => std::future::pending().await,
-        }
-    };
-    let cancelled = async {
-        loop {
-            if *cancel.borrow_and_update() {
-                return;
-            }
-            if cancel.changed().await.is_err() {
-                std::future::pending::<()>().await;
-            }
-        }
-    };
-    let end = tokio::select! {
-        st = child.wait() => match st {
-            Ok(st) => {
-                use std::os::unix::process::ExitStatusExt;
-                match (st.code(), st.signal()) {
-                    (Some(c), _) => ChildEnd::Exit(c),
-                    (None, Some(s)) => ChildEnd::Signal(s),
-                    _ => ChildEnd::Exit(-1),
-                }
-            }
-            Err(e) => ChildEnd::SpawnError(e),
-        },
-        _ = sleep => ChildEnd::Timeout(limit.unwrap_or_default()),
-        _ = cancelled => ChildEnd::Cancelled,
-    };
-    if matches!(end, ChildEnd::Timeout(_) | ChildEnd::Cancelled) {
-        kill_group(pid);
-        let _ = child.kill().await;
-    }
-    let tail = match reader {
-        Some(h) => match tokio::time::timeout(Duration::from_secs(2), h).await {
-            Ok(Ok(t)) => t,
-            _ => Vec::new(),
-        },
-        None => Vec::new(),
-    };
-    (end, tail)
-}
-
-/// SIGKILL to the worker's whole process group (the worker and anything it started).
-fn kill_group(pid: Option<u32>) {
-    let Some(pid) = pid.and_then(|p| rustix::process::Pid::from_raw(p as i32)) else {
-        return;
-    };
-    let _ = rustix::process::kill_process_group(pid, rustix::process::Signal::KILL);
-}
-
-/// The last meaningful line(s) of the child's stderr.
-fn stderr_message(tail: &[u8]) -> String {
-    let s = String::from_utf8_lossy(tail);
-    let lines: Vec<&str> = s
-        .lines()
-        .map(|l| l.trim().trim_start_matches("error: "))
-        .filter(|l| !l.is_empty())
-        .collect();
-    let n = lines.len();
-    lines[n.saturating_sub(3)..].join(" | ")
 }
 
 /// The `"daemon"` object of a log.
@@ -1295,12 +1108,6 @@ pub fn put_back_waiting(ctx: &RunCtx, job: &Job) -> Option<io::Result<OsString>>
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn stderr_tail_keeps_the_last_lines() {
-        assert_eq!(stderr_message(b"a\n\nb\nc\nerror: d\n"), "b | c | d");
-        assert_eq!(stderr_message(b""), "");
-    }
 
     #[test]
     fn final_log_adds_the_daemon_fields() {

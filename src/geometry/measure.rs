@@ -1,6 +1,6 @@
 //! Small geometric helpers shared by the methods and the checks.
 
-use glam::DVec3;
+use glam::{DVec2, DVec3};
 
 /// Twice the area vector of a triangle.
 #[inline]
@@ -159,6 +159,19 @@ pub fn centroid(pts: &[DVec3]) -> DVec3 {
     pts.iter().copied().sum::<DVec3>() / pts.len() as f64
 }
 
+/// `q` strictly inside the polygon `poly` (crossing number; floating point, not exact).
+pub fn point_in_polygon(poly: &[DVec2], q: DVec2) -> bool {
+    let mut c = false;
+    let n = poly.len();
+    for i in 0..n {
+        let (a, b) = (poly[i], poly[(i + 1) % n]);
+        if (a.y > q.y) != (b.y > q.y) && q.x < a.x + (q.y - a.y) / (b.y - a.y) * (b.x - a.x) {
+            c = !c;
+        }
+    }
+    c
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -196,3 +209,4 @@ mod tests {
         assert_eq!(quality(a, DVec3::X, DVec3::X * 2.0), 0.0);
     }
 }
+

@@ -39,7 +39,7 @@ fn planar_with_hole(poly: &[DVec2], h: f64, lo: f64, hi: f64) -> (Mesh, Vec<Vert
             let edge = i == 0 || j == 0 || i == n || j == n;
             let s = if edge { 0.0 } else { 0.25 * h };
             let q = DVec2::new(lo + i as f64 * h + s * jx, lo + j as f64 * h + s * jy);
-            if inside(poly, q) || dist_to_poly(poly, q) < 0.6 * h {
+            if measure::point_in_polygon(poly, q) || dist_to_poly(poly, q) < 0.6 * h {
                 continue;
             }
             let _ = cdt.insert(Point2::new(q.x, q.y));
@@ -64,7 +64,7 @@ fn planar_with_hole(poly: &[DVec2], h: f64, lo: f64, hi: f64) -> (Mesh, Vec<Vert
             (ps[0].x + ps[1].x + ps[2].x) / 3.0,
             (ps[0].y + ps[1].y + ps[2].y) / 3.0,
         );
-        if inside(poly, cen) {
+        if measure::point_in_polygon(poly, cen) {
             continue;
         }
         raw.faces.push([
@@ -82,18 +82,6 @@ fn planar_with_hole(poly: &[DVec2], h: f64, lo: f64, hi: f64) -> (Mesh, Vec<Vert
         .find(|l| l.contains(&VertexId(handles[0].index() as u32)))
         .unwrap();
     (mesh, lp)
-}
-
-fn inside(poly: &[DVec2], q: DVec2) -> bool {
-    let mut c = false;
-    let n = poly.len();
-    for i in 0..n {
-        let (a, b) = (poly[i], poly[(i + 1) % n]);
-        if (a.y > q.y) != (b.y > q.y) && q.x < a.x + (q.y - a.y) / (b.y - a.y) * (b.x - a.x) {
-            c = !c;
-        }
-    }
-    c
 }
 
 fn dist_to_poly(poly: &[DVec2], q: DVec2) -> f64 {

@@ -4,7 +4,7 @@
 use super::predict::{fit_plane, Predicted, Segmentation};
 use crate::fasthash::HashMap;
 use crate::fill::kit::FillError;
-use crate::geometry::measure::newell_normal;
+use crate::geometry::measure::{newell_normal, point_in_polygon};
 use crate::geometry::predicates::{self, orient2, p2, P2};
 use glam::{DVec2, DVec3};
 use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
@@ -311,18 +311,6 @@ fn second_plane(s: &Segmentation, p: &Predicted) -> bool {
     }
 }
 
-/// Point strictly inside a polygon (crossing number).
-pub(crate) fn inside(poly: &[DVec2], q: DVec2) -> bool {
-    let mut c = false;
-    let n = poly.len();
-    for i in 0..n {
-        let (a, b) = (poly[i], poly[(i + 1) % n]);
-        if (a.y > q.y) != (b.y > q.y) && q.x < a.x + (q.y - a.y) / (b.y - a.y) * (b.x - a.x) {
-            c = !c;
-        }
-    }
-    c
-}
 
 fn dist_to_segment(a: DVec2, b: DVec2, q: DVec2) -> f64 {
     let ab = b - a;
@@ -360,7 +348,7 @@ pub fn triangulate(
     let mut kept: Vec<(DVec2, DVec3)> = Vec::new();
     for pr in pts {
         let (q, p) = (proj.project_predicted(pr), pr.pos);
-        if !q.is_finite() || !inside(poly, q) {
+        if !q.is_finite() || !point_in_polygon(poly, q) {
             continue;
         }
         let near_loop = (0..k).any(|i| dist_to_segment(poly[i], poly[(i + 1) % k], q) < drop_dist);
@@ -437,7 +425,7 @@ pub fn triangulate(
             (ps[0].x + ps[1].x + ps[2].x) / 3.0,
             (ps[0].y + ps[1].y + ps[2].y) / 3.0,
         );
-        if !inside(poly, cen) {
+        if !point_in_polygon(poly, cen) {
             continue;
         }
         let vs = f.vertices();

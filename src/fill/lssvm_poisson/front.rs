@@ -3,6 +3,9 @@
 //! turning over.
 
 use super::*;
+use crate::geometry::predicates::{
+    orient2, overlap2d_labeled, p2, segments_cross, strictly_inside, P2,
+};
 
 /// Guide normal field over the hole: inverse-square-distance mean of the loop's vertex
 /// normals. It does not depend on the patch, so it cannot drift with it.
@@ -119,12 +122,12 @@ pub(super) fn project_along(pts: &[DVec3], n: DVec3) -> Option<Vec<DVec3>> {
     }
     let t1 = n.any_orthonormal_vector();
     let t2 = n.cross(t1);
-    let q: Vec<(f64, f64)> = pts.iter().map(|p| (p.dot(t1), p.dot(t2))).collect();
+    let q: Vec<P2> = pts.iter().map(|p| p2(p.dot(t1), p.dot(t2))).collect();
     let m = q.len();
     let area2: f64 = (0..m)
         .map(|i| {
             let (a, b) = (q[i], q[(i + 1) % m]);
-            a.0 * b.1 - b.0 * a.1
+            a.x * b.y - b.x * a.y
         })
         .sum();
     if !positive(area2) {
@@ -140,7 +143,7 @@ pub(super) fn project_along(pts: &[DVec3], n: DVec3) -> Option<Vec<DVec3>> {
             }
         }
     }
-    Some(q.into_iter().map(|(x, y)| DVec3::new(x, y, 0.0)).collect())
+    Some(q.into_iter().map(|c| DVec3::new(c.x, c.y, 0.0)).collect())
 }
 
 /// Runs a front until every loop is closed.
@@ -508,7 +511,7 @@ impl Front {
         }
         let t1 = n.any_orthonormal_vector();
         let t2 = n.cross(t1);
-        let q: Vec<(f64, f64)> = pts.iter().map(|p| (p.dot(t1), p.dot(t2))).collect();
+        let q: Vec<P2> = pts.iter().map(|p| p2(p.dot(t1), p.dot(t2))).collect();
         // simple polygon?
         for a in 0..m {
             for b in a + 2..m {
@@ -531,7 +534,7 @@ impl Front {
                 continue;
             }
             if (0..m).any(|t| {
-                t != i0 && t != j && t != i2 && point_in_triangle(q[t], q[i0], q[j], q[i2])
+                t != i0 && t != j && t != i2 && strictly_inside(q[t], q[i0], q[j], q[i2])
             }) {
                 continue;
             }
@@ -652,9 +655,9 @@ impl Front {
         // geometric checks in the tangent plane at p
         let t1 = n.any_orthonormal_vector();
         let t2 = n.cross(t1);
-        let proj = |x: DVec3| -> (f64, f64) {
+        let proj = |x: DVec3| -> P2 {
             let d = x - p;
-            (d.dot(t1), d.dot(t2))
+            p2(d.dot(t1), d.dot(t2))
         };
         let radius = self.radius;
         let near = |x: DVec3| (x - p).length() <= radius;
@@ -685,7 +688,7 @@ impl Front {
                 if !near(pv) {
                     continue;
                 }
-                if point_in_triangle(proj(pv), px, py, pz) {
+                if strictly_inside(proj(pv), px, py, pz) {
                     return None;
                 }
             }
@@ -701,7 +704,7 @@ impl Front {
                     if !near(pc) && !near(pd) {
                         continue;
                     }
-                    if segments_cross((0.0, 0.0), pq, proj(pc), proj(pd)) {
+                    if segments_cross(p2(0.0, 0.0), pq, proj(pc), proj(pd)) {
                         return None;
                     }
                 }
@@ -715,7 +718,7 @@ impl Front {
                 if (o.centre - p).length() > radius || o.normal.dot(n) < 0.2 {
                     continue;
                 }
-                if overlap2d(t, &pq, &o.ids, &o.pts.map(proj)) {
+                if overlap2d_labeled(t, &pq, &o.ids, &o.pts.map(proj)) {
                     return None;
                 }
             }
@@ -769,84 +772,4 @@ pub(super) fn split_loops(seq: Vec<u32>) -> Vec<Vec<u32>> {
         }
     }
     out
-}
-
-/// Interior overlap of two projected triangles given with their vertex labels (shared
-/// labels are the same vertex).
-pub(super) fn overlap2d(
-    ta: &[u32; 3],
-    pa: &[(f64, f64); 3],
-    tb: &[u32; 3],
-    pb: &[(f64, f64); 3],
-) -> bool {
-    let shared: Vec<(usize, usize)> = (0..3)
-        .flat_map(|i| (0..3).map(move |j| (i, j)))
-        .filter(|&(i, j)| ta[i] == tb[j])
-        .collect();
-    match shared.len() {
-        3 => return true,
-        2 => {
-            // same side of the shared edge?
-            let (i0, j0) = shared[0];
-            let (i1, _) = shared[1];
-            let ia = 3 - i0 - i1;
-            let jb = (0..3).find(|&j| j != j0 && j != shared[1].1).unwrap_or(0);
-            let e0 = pa[i0];
-            let e1 = pa[i1];
-            let sa = orient2(e0, e1, pa[ia]);
-            let sb = orient2(e0, e1, pb[jb]);
-            return sa * sb > 0.0;
-        }
-        _ => {}
-    }
-    for i in 0..3 {
-        for j in 0..3 {
-            let (a0, a1) = (ta[i], ta[(i + 1) % 3]);
-            let (b0, b1) = (tb[j], tb[(j + 1) % 3]);
-            if a0 == b0 || a0 == b1 || a1 == b0 || a1 == b1 {
-                continue;
-            }
-            if segments_cross(pa[i], pa[(i + 1) % 3], pb[j], pb[(j + 1) % 3]) {
-                return true;
-            }
-        }
-    }
-    for i in 0..3 {
-        if !tb.contains(&ta[i]) && point_in_triangle(pa[i], pb[0], pb[1], pb[2]) {
-            return true;
-        }
-    }
-    for j in 0..3 {
-        if !ta.contains(&tb[j]) && point_in_triangle(pb[j], pa[0], pa[1], pa[2]) {
-            return true;
-        }
-    }
-    false
-}
-
-pub(super) fn orient2(a: (f64, f64), b: (f64, f64), c: (f64, f64)) -> f64 {
-    (b.0 - a.0) * (c.1 - a.1) - (b.1 - a.1) * (c.0 - a.0)
-}
-
-/// Proper crossing of two segments (touching at an end does not count).
-pub(super) fn segments_cross(a: (f64, f64), b: (f64, f64), c: (f64, f64), d: (f64, f64)) -> bool {
-    let d1 = orient2(a, b, c);
-    let d2 = orient2(a, b, d);
-    let d3 = orient2(c, d, a);
-    let d4 = orient2(c, d, b);
-    ((d1 > 0.0 && d2 < 0.0) || (d1 < 0.0 && d2 > 0.0))
-        && ((d3 > 0.0 && d4 < 0.0) || (d3 < 0.0 && d4 > 0.0))
-}
-
-/// Strictly inside a triangle (either orientation).
-pub(super) fn point_in_triangle(
-    p: (f64, f64),
-    a: (f64, f64),
-    b: (f64, f64),
-    c: (f64, f64),
-) -> bool {
-    let s1 = orient2(a, b, p);
-    let s2 = orient2(b, c, p);
-    let s3 = orient2(c, a, p);
-    (s1 > 0.0 && s2 > 0.0 && s3 > 0.0) || (s1 < 0.0 && s2 < 0.0 && s3 < 0.0)
 }

@@ -60,15 +60,8 @@ struct Run {
 /// Fills, and checks that the patch keeps the initial front's triangles, passes the
 /// topology and degeneracy checks and applies to a valid mesh.
 fn run(mesh: &Mesh, lp: &[VertexId], policy: &Policy) -> Run {
-    let hole = Hole::new(0, mesh, lp.to_vec(), policy);
-    let ctx = FillContext {
-        mesh,
-        hole: &hole,
-        policy,
-        deadline: Deadline::none(),
-        checker: None,
-    };
-    let patch = fill(&ctx).unwrap();
+    let (hole, patch) = crate::fill::kit::run_on(mesh, lp.to_vec(), policy, fill);
+    let patch = patch.unwrap();
     let front = initial_front(
         mesh,
         lp,

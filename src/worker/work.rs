@@ -1,0 +1,751 @@
+//! `holefill worker`: takes scans from the work queue, repairs each in the isolated
+//! child of the inbox daemon ([`crate::daemon::child`]), stores the outcome, and only
+//! then acknowledges.
+//!
+//! One delivery, in order:
+//! 1. the message is read and checked ([`ScanMsg::validate`]); one that is not a job
+//!    is terminated (logged, never redelivered);
+//! 2. if the results or failed bucket already holds the key's log, the scan is done
+//!    (a redelivery after a crash between the upload and the ack): its notification is
+//!    published again (de-duplicated by its id) and the job acknowledged, unrepaired;
+//! 3. on a delivery past `max_deliver` (every attempt ended with the worker gone:
+//!    killed, crashed, lost its connection) the scan fails at once, stage `worker`;
+//! 4. its files are downloaded into a private folder and checked against their
+//!    SHA-256 and sizes; the mesh is repaired by `holefill fill` under the limits;
+//! 5. repaired (exit 0 or 2): the model, the set's other files and the log (last) go
+//!    into the results bucket; a permanent failure (exit 65 malformed, 70 internal
+//!    error, 78 policy; a file missing or not matching its digest): the submitted files
+//!    and the log into the failed bucket; then the done notification is published and
+//!    the job acknowledged;
+//! 6. a retryable outcome (the child crashed, was killed, hit its time limit, an I/O
+//!    error, exit 74; the server unreachable) is negatively acknowledged with a
+//!    back-off (`backoff_secs`, doubled per delivery up to `backoff_max_secs`); on the
+//!    `max_deliver`-th delivery it fails instead (stage `worker`, or `io`).
+//!
+//! While a delivery is handled the worker sends an in-progress acknowledgement every
+//! third of `ack_wait`, so a long repair is not redelivered; a worker that dies stops
+//! sending them and its scan is redelivered once `ack_wait` has passed.
+
+use super::config::{Names, QueueSettings};
+use super::queue::{self, Buckets, Conn};
+use super::scan::{sha256_hex, DoneMsg, ScanMsg, VERSION};
+use crate::daemon::child::{self, ChildEnd, Input};
+use crate::daemon::fsops;
+use crate::daemon::hooks::Hooks;
+use anyhow::{anyhow, bail, Context as _, Result};
+use async_nats::jetstream::{self, AckKind};
+use futures_util::StreamExt;
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant, SystemTime};
+use tokio::io::AsyncWriteExt;
+use tokio::sync::watch;
+
+/// What a worker process runs with.
+pub struct WorkerCtx {
+    pub conn: Conn,
+    pub names: Names,
+    pub queue: QueueSettings,
+    pub buckets: Buckets,
+    pub exe: PathBuf,
+    /// The validated policy file (`None`: built-in default).
+    pub policy: Option<PathBuf>,
+    pub limits: Limits,
+    pub hooks: Hooks,
+    pub cores: usize,
+    /// The worker's private folder (removed at exit).
+    pub work_dir: PathBuf,
+    pub host: String,
+    pub pid: u32,
+    pub instance: String,
+    pub seq: AtomicU64,
+}
+
+/// The limits of one repair (the daemon's keys of the same names).
+#[derive(Clone, Debug)]
+pub struct Limits {
+    pub max_file_bytes: u64,
+    pub max_faces: u64,
+    pub max_vertices: u64,
+    pub time_limit: Option<Duration>,
+    pub memory_limit_mb: u64,
+}
+
+impl WorkerCtx {
+    fn spec(&self) -> child::Spec<'_> {
+        child::Spec {
+            exe: &self.exe,
+            policy: self.policy.as_deref(),
+            max_file_bytes: self.limits.max_file_bytes,
+            max_faces: self.limits.max_faces,
+            max_vertices: self.limits.max_vertices,
+            time_limit: self.limits.time_limit,
+            memory_limit_mb: self.limits.memory_limit_mb,
+            cores: self.cores,
+            hooks: &self.hooks,
+        }
+    }
+}
+
+/// One slot: pulls one message at a time and handles it, until `stop` turns true.
+pub async fn slot(
+    ctx: Arc<WorkerCtx>,
+    consumer: jetstream::consumer::PullConsumer,
+    mut stop: watch::Receiver<bool>,
+    cancel: watch::Receiver<bool>,
+) {
+    let mut logged: Option<Instant> = None;
+    while !*stop.borrow() {
+        let batch = consumer
+            .batch()
+            .max_messages(1)
+            .expires(Duration::from_secs(2))
+            .messages()
+            .await;
+        let mut batch = match batch {
+            Ok(b) => b,
+            Err(e) => {
+                if logged.is_none_or(|l| l.elapsed() >= Duration::from_secs(10)) {
+                    tracing::warn!("cannot pull from the queue: {e} (retrying)");
+                    logged = Some(Instant::now());
+                }
+                let _ = tokio::time::timeout(Duration::from_millis(500), stop.changed()).await;
+                continue;
+            }
+        };
+        while let Some(m) = batch.next().await {
+            match m {
+                Ok(msg) => handle(&ctx, Arc::new(msg), cancel.clone()).await,
+                Err(e) => {
+                    tracing::debug!("pull: {e}");
+                    tokio::time::sleep(Duration::from_millis(200)).await;
+                    break;
+                }
+            }
+        }
+    }
+}
+
+/// How an attempt ended.
+enum Outcome {
+    /// Repaired: the model and its child log in `dir`.
+    Repaired { exit: i32, model: PathBuf, log: Value },
+    /// A permanent failure.
+    Failed {
+        stage: &'static str,
+        error: String,
+        exit: Option<i32>,
+        log: Option<Value>,
+    },
+    /// Retryable (a crash, a kill, a time-out, an I/O error).
+    Retry { stage: &'static str, error: String },
+}
+
+/// Handles one delivery (see the module documentation).
+async fn handle(ctx: &Arc<WorkerCtx>, msg: Arc<jetstream::Message>, cancel: watch::Receiver<bool>) {
+    let delivered = msg
+        .info()
+        .map(|i| u32::try_from(i.delivered).unwrap_or(u32::MAX))
+        .unwrap_or(1);
+    let scan = match ScanMsg::parse(&msg.payload) {
+        Ok(s) => s,
+        Err(e) => {
+            tracing::error!("dropping a message of {}: {e}", msg.subject);
+            let _ = msg.ack_with(AckKind::Term).await;
+            return;
+        }
+    };
+    let key = scan.key();
+    let t0 = Instant::now();
+    let started = SystemTime::now();
+    // in-progress acknowledgements for as long as this delivery is handled
+    let ticker = {
+        let m = msg.clone();
+        let every = (ctx.queue.ack_wait / 3).max(Duration::from_millis(500));
+        tokio::spawn(async move {
+            loop {
+                tokio::time::sleep(every).await;
+                let _ = m.ack_with(AckKind::Progress).await;
+            }
+        })
+    };
+    let r = handle_scan(ctx, &scan, delivered, started, t0, cancel).await;
+    ticker.abort();
+    match r {
+        Ok(Settled::Done(status)) => match msg.double_ack().await {
+            Ok(()) => tracing::info!(
+                "done: {status} {key} (delivery {delivered}, {:.2} s)",
+                t0.elapsed().as_secs_f64()
+            ),
+            // the next delivery finds the outcome stored and only acknowledges
+            Err(e) => tracing::warn!("{key}: {status}, but the ack failed: {e}"),
+        },
+        Ok(Settled::Again(why, delay)) => {
+            tracing::warn!(
+                "{key}: {why}; delivery {delivered} of {}, retried in {} s",
+                ctx.queue.max_deliver,
+                delay.as_secs()
+            );
+            let _ = msg.ack_with(AckKind::Nak(Some(delay))).await;
+        }
+        Err(e) => {
+            // the server unreachable, or an upload failed: the outcome is not stored
+            let delay = ctx.queue.backoff_after(delivered);
+            tracing::warn!("{key}: {e:#}; retried in {} s", delay.as_secs());
+            let _ = msg.ack_with(AckKind::Nak(Some(delay))).await;
+        }
+    }
+}
+
+enum Settled {
+    /// Stored (and notified): acknowledge. "repaired", "failed", "already done".
+    Done(&'static str),
+    /// Negatively acknowledge with this delay.
+    Again(String, Duration),
+}
+
+async fn handle_scan(
+    ctx: &Arc<WorkerCtx>,
+    scan: &ScanMsg,
+    delivered: u32,
+    started: SystemTime,
+    t0: Instant,
+    cancel: watch::Receiver<bool>,
+) -> Result<Settled> {
+    if let Some(done) = stored_outcome(ctx, scan).await? {
+        notify(ctx, &done).await?;
+        return Ok(Settled::Done("already done"));
+    }
+    let info = |status: &str, exit: Option<i32>| {
+        json!({
+            "host": ctx.host,
+            "pid": ctx.pid,
+            "instance": ctx.instance,
+            "scan": scan.scan,
+            "key": scan.key(),
+            "digest": scan.digest,
+            "files": scan.files.iter().map(|f| &f.name).collect::<Vec<_>>(),
+            "submitted": scan.submitted,
+            "origin": scan.origin,
+            "started": fsops::rfc3339(started),
+            "finished": fsops::rfc3339(SystemTime::now()),
+            "seconds": t0.elapsed().as_secs_f64(),
+            "delivery": delivered,
+            "max_deliver": ctx.queue.max_deliver,
+            "status": status,
+            "worker_exit": exit,
+        })
+    };
+    if delivered > ctx.queue.max_deliver {
+        let error = format!(
+            "no outcome after {} deliveries: the worker died (killed, crashed or cut off) on each",
+            ctx.queue.max_deliver
+        );
+        let log = final_log(None, "failed", Some("worker"), Some(&error), info("failed", None));
+        store_failed(ctx, scan, None, log, "worker", &error).await?;
+        return Ok(Settled::Done("failed"));
+    }
+    tracing::info!("taken {} (delivery {delivered})", scan.key());
+    let dir = ctx
+        .work_dir
+        .join(ctx.seq.fetch_add(1, Ordering::Relaxed).to_string());
+    let r = attempt(ctx, scan, &dir, cancel).await;
+    let settled = match r {
+        Outcome::Repaired { exit, model, log } => {
+            let log = final_log(Some(log), "repaired", None, None, info("repaired", Some(exit)));
+            store_repaired(ctx, scan, &dir, &model, log).await?;
+            Settled::Done("repaired")
+        }
+        Outcome::Failed {
+            stage,
+            error,
+            exit,
+            log,
+        } => {
+            let log = final_log(log, "failed", Some(stage), Some(&error), info("failed", exit));
+            store_failed(ctx, scan, Some(&dir.join("in")), log, stage, &error).await?;
+            Settled::Done("failed")
+        }
+        Outcome::Retry { stage, error } => {
+            if delivered >= ctx.queue.max_deliver {
+                let error = format!(
+                    "{error} (delivery {delivered} of {}; giving up)",
+                    ctx.queue.max_deliver
+                );
+                let log = final_log(None, "failed", Some(stage), Some(&error), info("failed", None));
+                store_failed(ctx, scan, Some(&dir.join("in")), log, stage, &error).await?;
+                Settled::Done("failed")
+            } else {
+                Settled::Again(error, ctx.queue.backoff_after(delivered))
+            }
+        }
+    };
+    let _ = tokio::fs::remove_dir_all(&dir).await;
+    Ok(settled)
+}
+
+/// The outcome already stored for this scan, as its notification.
+async fn stored_outcome(ctx: &WorkerCtx, scan: &ScanMsg) -> Result<Option<DoneMsg>> {
+    let log = scan.object(&scan.log_name());
+    for (bucket, status, name) in [
+        (&ctx.buckets.results, "repaired", &ctx.names.results),
+        (&ctx.buckets.failed, "failed", &ctx.names.failed),
+    ] {
+        match bucket.info(&log).await {
+            Ok(i) if !i.deleted => {
+                let mut files: Vec<String> = Vec::new();
+                let (stage, error) = match status {
+                    "repaired" => {
+                        files.extend(scan.files.iter().map(|f| f.name.clone()));
+                        (None, None)
+                    }
+                    _ => {
+                        // which of the submitted files were kept with the log
+                        for f in &scan.files {
+                            if bucket.info(scan.object(&f.name)).await.is_ok_and(|i| !i.deleted) {
+                                files.push(f.name.clone());
+                            }
+                        }
+                        let (stage, error) = read_stage(bucket, &log).await;
+                        (stage, error)
+                    }
+                };
+                files.push(scan.log_name());
+                return Ok(Some(done_msg(scan, status, name, files, stage, error)));
+            }
+            Ok(_) => {}
+            Err(e) if e.kind() == async_nats::jetstream::object_store::InfoErrorKind::NotFound => {}
+            Err(e) => bail!("cannot look for the stored outcome: {e}"),
+        }
+    }
+    Ok(None)
+}
+
+async fn read_stage(
+    bucket: &async_nats::jetstream::object_store::ObjectStore,
+    log: &str,
+) -> (Option<String>, Option<String>) {
+    let Ok(bytes) = get_bytes(bucket, log, 64 << 20).await else {
+        return (None, None);
+    };
+    let v: Value = serde_json::from_slice(&bytes).unwrap_or(Value::Null);
+    (
+        v["stage"].as_str().map(String::from),
+        v["error"].as_str().map(String::from),
+    )
+}
+
+fn done_msg(
+    scan: &ScanMsg,
+    status: &str,
+    bucket: &str,
+    files: Vec<String>,
+    stage: Option<String>,
+    error: Option<String>,
+) -> DoneMsg {
+    DoneMsg {
+        version: VERSION,
+        scan: scan.scan.clone(),
+        digest: scan.digest.clone(),
+        key: scan.key(),
+        status: status.to_string(),
+        bucket: bucket.to_string(),
+        files,
+        stage,
+        error,
+    }
+}
+
+/// Publishes the done notification (id `done:KEY`: once, however often it is sent).
+async fn notify(ctx: &WorkerCtx, done: &DoneMsg) -> Result<()> {
+    let payload = serde_json::to_vec(done)?;
+    let publish = jetstream::message::PublishMessage::build()
+        .message_id(format!("done:{}", done.key))
+        .payload(payload.into());
+    ctx.conn
+        .js
+        .send_publish(ctx.names.done_subject.clone(), publish)
+        .await
+        .map_err(|e| anyhow!("cannot publish the done notification: {e}"))?
+        .await
+        .map_err(|e| anyhow!("the done notification was not stored: {e}"))?;
+    Ok(())
+}
+
+/// An object's bytes, at most `max` of them.
+pub async fn get_bytes(
+    bucket: &async_nats::jetstream::object_store::ObjectStore,
+    name: &str,
+    max: u64,
+) -> Result<Vec<u8>> {
+    use tokio::io::AsyncReadExt;
+    let obj = bucket.get(name).await.map_err(|e| anyhow!("{name}: {e}"))?;
+    let mut v = Vec::new();
+    obj.take(max.saturating_add(1))
+        .read_to_end(&mut v)
+        .await
+        .with_context(|| format!("{name}: read"))?;
+    if v.len() as u64 > max {
+        bail!("{name}: larger than {max} bytes");
+    }
+    Ok(v)
+}
+
+/// Downloads the set, runs the child, reads its outputs.
+async fn attempt(
+    ctx: &Arc<WorkerCtx>,
+    scan: &ScanMsg,
+    dir: &Path,
+    mut cancel: watch::Receiver<bool>,
+) -> Outcome {
+    let input = dir.join("in");
+    let out_dir = dir.join("out");
+    if let Err(e) = make_dirs(&[&input, &out_dir]).await {
+        return Outcome::Retry {
+            stage: "io",
+            error: format!("cannot make the work folder {}: {e}", dir.display()),
+        };
+    }
+    // the size limit before anything is downloaded
+    let max = ctx.limits.max_file_bytes;
+    if let Some(f) = scan.files.iter().find(|f| max > 0 && f.size > max) {
+        return Outcome::Failed {
+            stage: "limits",
+            error: format!("{}: {} bytes > max_file_bytes = {max}", f.name, f.size),
+            exit: None,
+            log: None,
+        };
+    }
+    for f in &scan.files {
+        let object = scan.object(&f.name);
+        match download(&ctx.buckets.scans, &object, &input.join(&f.name), f.size).await {
+            Ok(sha) if sha == f.sha256 => {}
+            Ok(_) => {
+                return Outcome::Failed {
+                    stage: "input",
+                    error: format!(
+                        "{}: the object {object} does not match the SHA-256 the job names",
+                        f.name
+                    ),
+                    exit: None,
+                    log: None,
+                }
+            }
+            Err(Download::Missing) => {
+                return Outcome::Failed {
+                    stage: "input",
+                    error: format!(
+                        "{}: the object {object} is not in the bucket {} (removed or expired)",
+                        f.name, ctx.names.scans
+                    ),
+                    exit: None,
+                    log: None,
+                }
+            }
+            Err(Download::Size(got)) => {
+                return Outcome::Failed {
+                    stage: "input",
+                    error: format!(
+                        "{}: the object {object} holds {got} bytes, the job names {}",
+                        f.name, f.size
+                    ),
+                    exit: None,
+                    log: None,
+                }
+            }
+            Err(Download::Other(e)) => {
+                return Outcome::Retry {
+                    stage: "io",
+                    error: format!("cannot download {object}: {e:#}"),
+                }
+            }
+        }
+    }
+    let ext = super::scan::mesh_ext(&scan.scan).unwrap_or_else(|| "obj".into());
+    let mesh = input.join(&scan.scan);
+    let model = out_dir.join(&scan.scan);
+    let child_log = dir.join("child.json");
+    let (end, stderr) = child::run(
+        &ctx.spec(),
+        &scan.scan,
+        Input::Path(&mesh),
+        &ext,
+        &model,
+        &child_log,
+        &mut cancel,
+    )
+    .await;
+    // the error names the file, not the worker's private folder
+    let msg = child::stderr_message(&stderr).replace(&format!("{}/", input.display()), "");
+    let read_log = || {
+        std::fs::read(&child_log)
+            .ok()
+            .and_then(|b| serde_json::from_slice::<Value>(&b).ok())
+    };
+    let or = |s: &str, d: &str| if s.is_empty() { d.to_string() } else { s.to_string() };
+    match end {
+        ChildEnd::Exit(code @ (0 | 2)) => match (model.is_file(), read_log()) {
+            (true, Some(log)) => Outcome::Repaired {
+                exit: code,
+                model,
+                log,
+            },
+            _ => Outcome::Failed {
+                stage: "output",
+                error: format!("the worker exited {code} but left no model or log"),
+                exit: Some(code),
+                log: None,
+            },
+        },
+        ChildEnd::Exit(65) => Outcome::Failed {
+            stage: "input",
+            error: or(&msg, "unreadable or malformed input (exit 65)"),
+            exit: Some(65),
+            log: read_log(),
+        },
+        ChildEnd::Exit(70) => Outcome::Failed {
+            stage: "repair",
+            error: or(&msg, "internal error (exit 70)"),
+            exit: Some(70),
+            log: read_log(),
+        },
+        ChildEnd::Exit(78) => Outcome::Failed {
+            stage: "policy",
+            error: format!("invalid policy (exit 78): {}", or(&msg, "-")),
+            exit: Some(78),
+            log: None,
+        },
+        ChildEnd::Exit(74) => Outcome::Retry {
+            stage: "io",
+            error: format!("worker exit 74 (I/O error): {}", or(&msg, "-")),
+        },
+        ChildEnd::Cancelled => Outcome::Retry {
+            stage: "worker",
+            error: "the worker is stopping".into(),
+        },
+        end => Outcome::Retry {
+            stage: "worker",
+            error: child::crash_reason(ctx.limits.memory_limit_mb, end, &msg),
+        },
+    }
+}
+
+async fn make_dirs(dirs: &[&Path]) -> std::io::Result<()> {
+    for d in dirs {
+        tokio::fs::create_dir_all(d).await?;
+    }
+    Ok(())
+}
+
+enum Download {
+    Missing,
+    Size(u64),
+    Other(anyhow::Error),
+}
+
+/// Downloads an object into `path` (created new), at most `size` bytes; its SHA-256.
+async fn download(
+    bucket: &async_nats::jetstream::object_store::ObjectStore,
+    object: &str,
+    path: &Path,
+    size: u64,
+) -> Result<String, Download> {
+    use async_nats::jetstream::object_store::GetErrorKind;
+    use tokio::io::AsyncReadExt;
+    let obj = match bucket.get(object).await {
+        Ok(o) => o,
+        Err(e) if e.kind() == GetErrorKind::NotFound => return Err(Download::Missing),
+        Err(e) => return Err(Download::Other(anyhow!("{e}"))),
+    };
+    if obj.info().size as u64 != size {
+        return Err(Download::Size(obj.info().size as u64));
+    }
+    let mut f = tokio::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(path)
+        .await
+        .map_err(|e| Download::Other(anyhow!("{}: {e}", path.display())))?;
+    let mut reader = obj.take(size.saturating_add(1));
+    let mut h = <sha2::Sha256 as sha2::Digest>::new();
+    let mut buf = vec![0u8; 128 * 1024];
+    let mut total = 0u64;
+    loop {
+        let n = reader
+            .read(&mut buf)
+            .await
+            .map_err(|e| Download::Other(anyhow!("{e}")))?;
+        if n == 0 {
+            break;
+        }
+        total += n as u64;
+        if total > size {
+            return Err(Download::Size(total));
+        }
+        sha2::Digest::update(&mut h, &buf[..n]);
+        f.write_all(&buf[..n])
+            .await
+            .map_err(|e| Download::Other(anyhow!("{}: {e}", path.display())))?;
+    }
+    if total != size {
+        return Err(Download::Size(total));
+    }
+    f.flush()
+        .await
+        .map_err(|e| Download::Other(anyhow!("{}: {e}", path.display())))?;
+    Ok(super::scan::hex(&sha2::Digest::finalize(h)))
+}
+
+/// Puts bytes or a file as an object.
+async fn put_file(
+    bucket: &async_nats::jetstream::object_store::ObjectStore,
+    name: &str,
+    path: &Path,
+) -> Result<()> {
+    let mut f = tokio::fs::File::open(path)
+        .await
+        .with_context(|| format!("{}", path.display()))?;
+    bucket
+        .put(name, &mut f)
+        .await
+        .map_err(|e| anyhow!("cannot store {name}: {e}"))?;
+    Ok(())
+}
+
+async fn put_bytes(
+    bucket: &async_nats::jetstream::object_store::ObjectStore,
+    name: &str,
+    bytes: &[u8],
+) -> Result<()> {
+    let mut r = bytes;
+    bucket
+        .put(name, &mut r)
+        .await
+        .map_err(|e| anyhow!("cannot store {name}: {e}"))?;
+    Ok(())
+}
+
+/// Model, the set's other files, then the log (its presence: complete); notifies.
+async fn store_repaired(
+    ctx: &WorkerCtx,
+    scan: &ScanMsg,
+    dir: &Path,
+    model: &Path,
+    log: Value,
+) -> Result<()> {
+    let b = &ctx.buckets.results;
+    put_file(b, &scan.object(&scan.scan), model).await?;
+    for f in &scan.files[1..] {
+        put_file(b, &scan.object(&f.name), &dir.join("in").join(&f.name)).await?;
+    }
+    let text = serde_json::to_vec_pretty(&log)?;
+    put_bytes(b, &scan.object(&scan.log_name()), &text).await?;
+    let mut files: Vec<String> = scan.files.iter().map(|f| f.name.clone()).collect();
+    files.push(scan.log_name());
+    notify(ctx, &done_msg(scan, "repaired", &ctx.names.results, files, None, None)).await
+}
+
+/// The submitted files that were downloaded (from `input`), then the log; notifies.
+async fn store_failed(
+    ctx: &WorkerCtx,
+    scan: &ScanMsg,
+    input: Option<&Path>,
+    log: Value,
+    stage: &str,
+    error: &str,
+) -> Result<()> {
+    let b = &ctx.buckets.failed;
+    let mut files = Vec::new();
+    if let Some(input) = input {
+        for f in &scan.files {
+            let p = input.join(&f.name);
+            // only a complete, verified copy
+            let ok = tokio::fs::read(&p)
+                .await
+                .is_ok_and(|bytes| sha256_hex(&bytes) == f.sha256);
+            if ok {
+                put_file(b, &scan.object(&f.name), &p).await?;
+                files.push(f.name.clone());
+            }
+        }
+    }
+    let text = serde_json::to_vec_pretty(&log)?;
+    put_bytes(b, &scan.object(&scan.log_name()), &text).await?;
+    files.push(scan.log_name());
+    let done = done_msg(
+        scan,
+        "failed",
+        &ctx.names.failed,
+        files,
+        Some(stage.to_string()),
+        Some(error.to_string()),
+    );
+    notify(ctx, &done).await
+}
+
+/// The repair log: the child's (or a minimal one) with the outcome and the worker's
+/// fields.
+fn final_log(
+    base: Option<Value>,
+    status: &str,
+    stage: Option<&str>,
+    error: Option<&str>,
+    worker: Value,
+) -> Value {
+    let mut base = base
+        .filter(Value::is_object)
+        .unwrap_or_else(|| json!({ "holefill_version": env!("CARGO_PKG_VERSION") }));
+    if let Some(o) = base.as_object_mut() {
+        o.insert("status".into(), json!(status));
+        o.insert("stage".into(), json!(stage));
+        o.insert("error".into(), json!(error));
+        o.insert("worker".into(), worker);
+    }
+    base
+}
+
+/// Runs the worker until SIGTERM or SIGINT: `workers` slots pull and repair; on a
+/// signal they stop pulling, running repairs get `grace` to finish, then their
+/// children are killed and their scans negatively acknowledged (redelivered at once).
+pub async fn run(ctx: Arc<WorkerCtx>, slots: usize, grace: Duration) -> Result<()> {
+    let consumer = queue::retry("the workers' consumer", Duration::from_secs(3600), || {
+        queue::workers_consumer(&ctx.conn, &ctx.names, &ctx.queue)
+    })
+    .await?;
+    let (stop_tx, stop_rx) = watch::channel(false);
+    let (cancel_tx, cancel_rx) = watch::channel(false);
+    let mut tasks = Vec::new();
+    for _ in 0..slots {
+        tasks.push(tokio::spawn(slot(
+            ctx.clone(),
+            consumer.clone(),
+            stop_rx.clone(),
+            cancel_rx.clone(),
+        )));
+    }
+    tracing::info!(
+        "worker ready: {slots} slot(s) on {} / {} (consumer {}), results in {}, failed in {}",
+        ctx.names.stream,
+        ctx.names.subject,
+        ctx.names.consumer,
+        ctx.names.results,
+        ctx.names.failed
+    );
+    let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+        .context("SIGTERM handler")?;
+    tokio::select! {
+        _ = term.recv() => {}
+        _ = tokio::signal::ctrl_c() => {}
+    }
+    tracing::info!("stopping: no new scans; running repairs get {} s", grace.as_secs());
+    let _ = stop_tx.send(true);
+    let all = futures_util::future::join_all(tasks);
+    tokio::pin!(all);
+    if tokio::time::timeout(grace, &mut all).await.is_err() {
+        let _ = cancel_tx.send(true);
+        let _ = all.await;
+    }
+    Ok(())
+}

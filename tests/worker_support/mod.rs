@@ -1,0 +1,338 @@
+//! Helpers of the queue worker's integration tests: a real `nats-server` with
+//! JetStream on a free loopback port and a temporary store, stopped (and its store
+//! removed) when dropped; the real binary as workers, submitter and results taker.
+#![allow(dead_code)]
+
+use serde_json::Value;
+use std::collections::HashMap;
+use std::fs;
+use std::net::{TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+pub fn bin() -> PathBuf {
+    PathBuf::from(env!("CARGO_BIN_EXE_holefill"))
+}
+
+/// The `nats-server` binary (`HOLEFILL_NATS_SERVER`, else on PATH or in /usr/sbin).
+pub fn nats_server_bin() -> PathBuf {
+    if let Some(p) = std::env::var_os("HOLEFILL_NATS_SERVER") {
+        return PathBuf::from(p);
+    }
+    let path = std::env::var_os("PATH").unwrap_or_default();
+    std::env::split_paths(&path)
+        .chain([PathBuf::from("/usr/sbin"), PathBuf::from("/usr/local/sbin")])
+        .map(|d| d.join("nats-server"))
+        .find(|p| p.is_file())
+        .expect("nats-server is not installed (apt-get install nats-server)")
+}
+
+/// A nats-server on 127.0.0.1 with JetStream, its store in a temporary folder.
+pub struct Nats {
+    pub port: u16,
+    pub store: tempfile::TempDir,
+    child: Option<Child>,
+    log: PathBuf,
+}
+
+impl Nats {
+    pub fn start() -> Nats {
+        let port = free_port();
+        let store = tempfile::tempdir().expect("tempdir");
+        let log = store.path().join("server.log");
+        let mut n = Nats {
+            port,
+            store,
+            child: None,
+            log,
+        };
+        n.spawn();
+        n
+    }
+
+    fn spawn(&mut self) {
+        let js = self.store.path().join("js");
+        let log = fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&self.log)
+            .unwrap();
+        let child = Command::new(nats_server_bin())
+            .args(["-js", "-a", "127.0.0.1", "-p", &self.port.to_string(), "-sd"])
+            .arg(&js)
+            .stdout(Stdio::from(log.try_clone().unwrap()))
+            .stderr(Stdio::from(log))
+            .spawn()
+            .expect("start nats-server");
+        self.child = Some(child);
+        let t = Instant::now();
+        while TcpStream::connect(("127.0.0.1", self.port)).is_err() {
+            assert!(
+                t.elapsed() < Duration::from_secs(20),
+                "nats-server did not start:\n{}",
+                self.server_log()
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    pub fn url(&self) -> String {
+        format!("nats://127.0.0.1:{}", self.port)
+    }
+
+    /// SIGKILL, then a new server on the same port and store.
+    pub fn restart(&mut self, down: Duration) {
+        self.kill();
+        std::thread::sleep(down);
+        self.spawn();
+    }
+
+    pub fn kill(&mut self) {
+        if let Some(mut c) = self.child.take() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+
+    pub fn server_log(&self) -> String {
+        fs::read_to_string(&self.log).unwrap_or_default()
+    }
+}
+
+impl Drop for Nats {
+    fn drop(&mut self) {
+        self.kill();
+    }
+}
+
+fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .expect("a free port")
+}
+
+/// A `holefill worker` process; killed when dropped. Its stderr goes to a file.
+pub struct Worker {
+    pub child: Child,
+    pub log: PathBuf,
+    _dir: tempfile::TempDir,
+}
+
+impl Worker {
+    pub fn start(nats: &Nats, args: &[&str], env: &[(&str, &str)]) -> Worker {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let log = dir.path().join("worker.log");
+        let f = fs::File::create(&log).unwrap();
+        let mut cmd = Command::new(bin());
+        cmd.args(["worker", "--nats", &nats.url(), "--workers", "1", "--work-dir"])
+            .arg(dir.path())
+            .args(args)
+            .env("RUST_LOG", "info,async_nats=warn")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::from(f));
+        for (k, v) in env {
+            cmd.env(k, v);
+        }
+        let child = cmd.spawn().expect("start holefill worker");
+        Worker {
+            child,
+            log,
+            _dir: dir,
+        }
+    }
+
+    pub fn log(&self) -> String {
+        fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
+    /// The keys this worker reported repaired (`repaired KEY` lines).
+    pub fn repaired(&self) -> Vec<String> {
+        lines_after(&self.log(), " done: repaired ")
+    }
+
+    pub fn failed(&self) -> Vec<String> {
+        lines_after(&self.log(), " done: failed ")
+    }
+
+    pub fn kill9(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+
+    pub fn is_ready(&self) -> bool {
+        self.log().contains("worker ready")
+    }
+}
+
+impl Drop for Worker {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn lines_after(log: &str, marker: &str) -> Vec<String> {
+    log.lines()
+        .filter_map(|l| {
+            let i = l.find(marker)?;
+            l[i + marker.len()..]
+                .split_whitespace()
+                .next()
+                .map(String::from)
+        })
+        .collect()
+}
+
+/// Runs `holefill ARGS`; panics with its output when it fails.
+pub fn holefill(args: &[&str]) -> Output {
+    let out = Command::new(bin())
+        .args(args)
+        .stdin(Stdio::null())
+        .output()
+        .expect("run holefill");
+    assert!(
+        out.status.success(),
+        "holefill {args:?}: {}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// Submits files (paths) and returns the keys, in order.
+pub fn submit(nats: &Nats, files: &[PathBuf]) -> Vec<String> {
+    let mut args: Vec<String> = vec!["submit".into(), "--nats".into(), nats.url()];
+    args.extend(files.iter().map(|p| p.display().to_string()));
+    let a: Vec<&str> = args.iter().map(|s| s.as_str()).collect();
+    let out = holefill(&a);
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| l.strip_prefix("queued ").or(l.strip_prefix("duplicate ")))
+        .map(String::from)
+        .collect()
+}
+
+/// Downloads what is done into `dir` (`holefill results`, not watching).
+pub fn results(nats: &Nats, dir: &Path) {
+    holefill(&["results", "--nats", &nats.url(), &dir.display().to_string()]);
+}
+
+/// Repair logs (`*.repair.json`) directly in `dir`, by name.
+pub fn logs(dir: &Path) -> HashMap<String, Value> {
+    let mut m = HashMap::new();
+    for e in fs::read_dir(dir).into_iter().flatten().flatten() {
+        let n = e.file_name().to_string_lossy().into_owned();
+        if n.ends_with(".repair.json") {
+            let v: Value = serde_json::from_slice(&fs::read(e.path()).unwrap())
+                .unwrap_or_else(|err| panic!("{n}: {err}"));
+            m.insert(n, v);
+        }
+    }
+    m
+}
+
+pub fn wait_until(timeout: Duration, mut cond: impl FnMut() -> bool) -> bool {
+    let t = Instant::now();
+    loop {
+        if cond() {
+            return true;
+        }
+        if t.elapsed() >= timeout {
+            return false;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// A small closed sphere with a hole at the pole, made distinct by `i` (a translation),
+/// as OBJ text (level 1: 80 faces before the cut).
+pub fn holed_obj(i: usize) -> String {
+    let t = (1.0 + 5f64.sqrt()) / 2.0;
+    let mut v: Vec<[f64; 3]> = [
+        [-1., t, 0.],
+        [1., t, 0.],
+        [-1., -t, 0.],
+        [1., -t, 0.],
+        [0., -1., t],
+        [0., 1., t],
+        [0., -1., -t],
+        [0., 1., -t],
+        [t, 0., -1.],
+        [t, 0., 1.],
+        [-t, 0., -1.],
+        [-t, 0., 1.],
+    ]
+    .to_vec();
+    let f: Vec<[usize; 3]> = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    for p in v.iter_mut() {
+        let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+        *p = [p[0] / l + i as f64, p[1] / l, p[2] / l];
+    }
+    // one subdivision
+    let mut mid: HashMap<(usize, usize), usize> = HashMap::new();
+    let mut faces = Vec::new();
+    let mut m = |a: usize, b: usize, v: &mut Vec<[f64; 3]>| -> usize {
+        let k = (a.min(b), a.max(b));
+        *mid.entry(k).or_insert_with(|| {
+            let (p, q) = (v[a], v[b]);
+            let c = [(p[0] + q[0]) / 2.0 - i as f64, (p[1] + q[1]) / 2.0, (p[2] + q[2]) / 2.0];
+            let l = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+            v.push([c[0] / l + i as f64, c[1] / l, c[2] / l]);
+            v.len() - 1
+        })
+    };
+    for [a, b, c] in f {
+        let ab = m(a, b, &mut v);
+        let bc = m(b, c, &mut v);
+        let ca = m(c, a, &mut v);
+        faces.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
+    }
+    // the hole: faces whose centroid is near the north pole (+y)
+    let mut s = String::new();
+    for p in &v {
+        s.push_str(&format!("v {} {} {}\n", p[0], p[1], p[2]));
+    }
+    for [a, b, c] in faces {
+        let cy = (v[a][1] + v[b][1] + v[c][1]) / 3.0;
+        if cy > 0.8 {
+            continue;
+        }
+        s.push_str(&format!("f {} {} {}\n", a + 1, b + 1, c + 1));
+    }
+    s
+}
+
+/// Writes `n` distinct holed meshes `sNNN.obj` into `dir`; their paths.
+pub fn write_meshes(dir: &Path, prefix: &str, n: usize) -> Vec<PathBuf> {
+    (0..n)
+        .map(|i| {
+            let p = dir.join(format!("{prefix}{i:03}.obj"));
+            fs::write(&p, holed_obj(i)).unwrap();
+            p
+        })
+        .collect()
+}
