@@ -80,7 +80,12 @@ pub fn carry(mesh: &Mesh, input: &RawMesh) -> (RawMesh, AttributesReport) {
                 .push("vertex colours: harmonic over the patch from the rim".into());
         }
     }
-    let normals = if new_vertices {
+    // the surface normals, only where something takes them
+    let wants_normals = a.normals.is_some()
+        || a.vertex
+            .iter()
+            .any(|p| matches!(p.meaning(), Meaning::Normal(_)));
+    let normals = if new_vertices && wants_normals {
         ctx.vertex_normals()
     } else {
         Vec::new()
@@ -346,11 +351,20 @@ impl<'m> Context<'m> {
         out
     }
 
-    /// Unit area-weighted vertex normals of the output mesh.
+    /// Unit area-weighted vertex normals of the output mesh at the vertices of the
+    /// patches (zero elsewhere: nothing there takes them).
     fn vertex_normals(&self) -> Vec<DVec3> {
-        (0..self.mesh.num_vertices())
-            .map(|v| self.mesh.vertex_normal(VertexId::from_idx(v)))
-            .collect()
+        let mut out = vec![DVec3::ZERO; self.mesh.num_vertices()];
+        let mut done = vec![false; self.mesh.num_vertices()];
+        for &f in self.patches.iter().flatten() {
+            for v in self.mesh.topo.face(f) {
+                if !done[v.idx()] {
+                    done[v.idx()] = true;
+                    out[v.idx()] = self.mesh.vertex_normal(v);
+                }
+            }
+        }
+        out
     }
 
     /// A vertex property for every output vertex, and how new vertices got it.
