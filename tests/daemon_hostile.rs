@@ -269,8 +269,9 @@ fn a_name_that_is_not_utf8_goes_to_failed_with_the_reason() {
         .iter()
         .all(|n| n.starts_with('.')));
     assert!(f.processing().is_empty());
+    // the journal line follows the log file (published first)
     assert!(
-        d.log().contains(&format!("{shown} failed at name")),
+        wait_until(LONG, || d.log().contains(&format!("{shown} failed at name"))),
         "{}",
         d.log()
     );

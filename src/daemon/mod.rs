@@ -974,6 +974,8 @@ impl Daemon {
                 if let (Some(m), None) = (metrics::global(), self.stopping) {
                     m.retry(if changed { "changed" } else { "retryable" });
                 }
+                // a folder may have gone (the outbox): checked again before the next claim
+                self.folders_checked = None;
                 if self.watcher.is_some() && changed {
                     self.expect.insert(inbox_name.clone(), Seen::Changed);
                 }

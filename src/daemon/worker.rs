@@ -429,13 +429,21 @@ fn prepare(ctx: &RunCtx, mut job: Job, t: Times) -> Result<(Job, fs::File, Stamp
         job.attempt = started;
         return Err(Box::new(fail(ctx, job, t, "worker", err, None, None, true)));
     }
-    // the worker writes there (an adopted folder's may be gone with the outbox)
+    // the worker writes there (an adopted folder's may be gone with the outbox). The
+    // outbox itself is never made here: when it vanished, the daemon's folder check
+    // makes it again (and says so); the file waits in the inbox until then.
+    if !fs::symlink_metadata(&ctx.layout.outbox).is_ok_and(|m| m.is_dir()) {
+        return Err(Box::new(put_back(
+            ctx,
+            job,
+            Some("the outbox is not there (it is made again before the file is taken)".into()),
+            false,
+        )));
+    }
     {
         use std::os::unix::fs::DirBuilderExt;
-        let _ = fs::DirBuilder::new()
-            .recursive(true)
-            .mode(0o700)
-            .create(&job.home.tmp);
+        let _ = claim::make_private_dir(&ctx.layout.tmp_root, 0o755);
+        let _ = fs::DirBuilder::new().mode(0o700).create(&job.home.tmp);
     }
     if job.rec.attempts != job.attempt {
         job.rec.attempts = job.attempt;
