@@ -223,7 +223,7 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
         Some(name) => Some(Format::from_name(name).ok_or_else(|| {
             Failure(
                 exit::USAGE,
-                format!("--input-format {name}: expected obj, ply, stl or off"),
+                format!("--input-format {name}: expected obj, ply, stl, off, gltf or glb"),
             )
         })?),
         None => Format::from_path(&args.input),
@@ -232,7 +232,7 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
         Failure(
             exit::DATAERR,
             format!(
-                "{}: unsupported format (expected .obj, .ply, .stl or .off)",
+                "{}: unsupported format (expected .obj, .ply, .stl, .off, .gltf or .glb)",
                 args.input.display()
             ),
         )
@@ -241,7 +241,7 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
         Some(name) => Format::from_name(name).ok_or_else(|| {
             Failure(
                 exit::USAGE,
-                format!("--format {name}: expected obj, ply, stl or off"),
+                format!("--format {name}: expected obj, ply, stl, off, gltf or glb"),
             )
         })?,
         // the output path's extension, else the input's format

@@ -621,3 +621,136 @@ fn cli_log_has_the_attributes_section() {
         assert_eq!(!d.is_empty(), dropped, "{a}");
     }
 }
+
+/// The holed 20 x 20 grid with UV = (x, y) / 20 and a linear colour, as OBJ text.
+fn linear_grid_obj(s: &Soup) -> String {
+    let mut t = String::new();
+    for p in &s.v {
+        writeln!(
+            t,
+            "v {} {} {} {} {} {}",
+            p[0],
+            p[1],
+            p[2],
+            p[0] / 20.0,
+            p[1] / 20.0,
+            0.25 + (p[0] + p[1]) / 80.0
+        )
+        .unwrap();
+    }
+    for p in &s.v {
+        writeln!(t, "vt {} {}", p[0] / 20.0, p[1] / 20.0).unwrap();
+    }
+    for f in &s.f {
+        writeln!(t, "f {0}/{0} {1}/{1} {2}/{2}", f[0] + 1, f[1] + 1, f[2] + 1).unwrap();
+    }
+    t
+}
+
+#[test]
+fn gltf_keeps_its_document_and_the_patch_gets_linear_uvs_and_colours() {
+    let dir = tempdir();
+    let (s, _) = cut(&grid_soup(20), [10.0, 10.0, 0.0], 4.0);
+    let obj = dir.path().join("grid.obj");
+    std::fs::write(&obj, linear_grid_obj(&s)).unwrap();
+    // a .gltf made by the writer, then given a material with extras, as a scanner's
+    let made = dir.path().join("made.gltf");
+    io::write(&made, &io::read(&obj, None).unwrap(), None).unwrap();
+    let mut doc: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&made).unwrap()).unwrap();
+    doc["materials"] = serde_json::json!([{"name": "skin", "extras": {"scanner": "XYZ-3000"}}]);
+    doc["meshes"][0]["primitives"][0]["material"] = serde_json::json!(0);
+    let src = dir.path().join("scan.gltf");
+    std::fs::write(&src, serde_json::to_vec(&doc).unwrap()).unwrap();
+
+    for out_name in ["out.gltf", "out.glb"] {
+        let out = dir.path().join(out_name);
+        let log = dir.path().join("log.json");
+        let r = run(&[
+            "fill",
+            src.to_str().unwrap(),
+            out.to_str().unwrap(),
+            "--report",
+            log.to_str().unwrap(),
+        ]);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        let j: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&log).unwrap()).unwrap();
+        assert_eq!(j["summary"]["filled"], 1, "{j}");
+        assert!(
+            j["attributes"]["dropped"].as_array().unwrap().is_empty(),
+            "{j}"
+        );
+
+        // the document: everything read is there unchanged, the patch a new primitive
+        let back = io::read(&out, None).expect("the output reads as glTF");
+        let g = back.attrs.gltf.as_ref().unwrap();
+        let o = &g.json;
+        assert_eq!(o["materials"], doc["materials"]);
+        let prims = o["meshes"][0]["primitives"].as_array().unwrap();
+        assert_eq!(prims.len(), 2, "{o}");
+        assert_eq!(prims[0], doc["meshes"][0]["primitives"][0]);
+        assert_eq!(prims[1]["material"], 0);
+        let n_acc = doc["accessors"].as_array().unwrap().len();
+        assert_eq!(
+            o["accessors"].as_array().unwrap()[..n_acc],
+            doc["accessors"].as_array().unwrap()[..]
+        );
+        // the input's buffer bytes are the start of the output's first buffer (.glb)
+        // or its first buffer as it was (.gltf)
+        let input = io::read(&src, None).unwrap();
+        let ib = &input.attrs.gltf.as_ref().unwrap().buffers[0];
+        assert_eq!(&g.buffers[0][..ib.len()], &ib[..]);
+        // every input vertex and triangle is there, bit for bit
+        assert_eq!(back.positions[..input.positions.len()], input.positions[..]);
+        assert_eq!(back.faces[..input.faces.len()], input.faces[..]);
+        assert!(back.faces.len() > input.faces.len());
+
+        // the patch's UVs and colours: the linear field within f32 rounding
+        let uv = back.attrs.uv.as_ref().unwrap();
+        let colors = back.colors.as_ref().unwrap();
+        let mut worst: f64 = 0.0;
+        for (k, f) in back.faces.iter().enumerate().skip(input.faces.len()) {
+            let idx = uv.index[k].expect("a patch face without UVs");
+            for c in 0..3 {
+                let p = back.positions[f[c] as usize];
+                let t = uv.values[idx[c] as usize];
+                worst = worst
+                    .max((t[0] - p.x / 20.0).abs())
+                    .max((t[1] - p.y / 20.0).abs());
+                let want = [p.x / 20.0, p.y / 20.0, 0.25 + (p.x + p.y) / 80.0];
+                for d in 0..3 {
+                    worst = worst.max((f64::from(colors[f[c] as usize][d]) - want[d]).abs());
+                }
+            }
+        }
+        assert!(worst < 1e-6, "{out_name}: worst deviation {worst}");
+    }
+
+    // as OBJ, its UVs are kept
+    let as_obj = dir.path().join("as.obj");
+    let r = run(&["fill", src.to_str().unwrap(), as_obj.to_str().unwrap()]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let o = io::read(&as_obj, None).unwrap();
+    assert!(o.attrs.uv.is_some());
+}
+
+#[test]
+fn a_gltf_without_holes_is_written_back_byte_for_byte() {
+    let dir = tempdir();
+    let s = icosphere(2);
+    let obj = dir.path().join("ball.obj");
+    write_obj(&obj, &s);
+    for name in ["ball.glb", "ball.gltf"] {
+        let src = dir.path().join(name);
+        io::write(&src, &io::read(&obj, None).unwrap(), None).unwrap();
+        let out = dir.path().join(format!("out-{name}"));
+        let r = run(&["fill", src.to_str().unwrap(), out.to_str().unwrap()]);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        assert_eq!(
+            std::fs::read(&src).unwrap(),
+            std::fs::read(&out).unwrap(),
+            "{name}"
+        );
+    }
+}

@@ -612,7 +612,7 @@ pub fn is_candidate_name(name: &OsStr) -> bool {
     if lower.ends_with(b".part") || lower.ends_with(b".tmp") {
         return false;
     }
-    [&b".obj"[..], b".ply", b".stl", b".off"]
+    [&b".obj"[..], b".ply", b".stl", b".off", b".glb", b".gltf"]
         .iter()
         .any(|e| lower.ends_with(e) && lower.len() > e.len())
 }

@@ -330,7 +330,7 @@ fn ext_of(job: &Job) -> String {
     let n = job.name.to_string_lossy();
     n.rsplit_once('.')
         .map(|(_, e)| e.to_ascii_lowercase())
-        .filter(|e| matches!(e.as_str(), "obj" | "ply" | "stl" | "off"))
+        .filter(|e| matches!(e.as_str(), "obj" | "ply" | "stl" | "off" | "glb" | "gltf"))
         .unwrap_or_else(|| "obj".to_string())
 }
 

@@ -315,6 +315,54 @@ pub struct StlExtras {
     pub attribute: Vec<u16>,
 }
 
+/// A triangle primitive of the glTF mesh that was read.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GltfPrim {
+    /// Its index in the mesh's `primitives`.
+    pub index: usize,
+    /// Its triangles in [`RawMesh::faces`]: `first_face..first_face + faces`.
+    pub first_face: usize,
+    pub faces: usize,
+    /// Its glTF vertices in the corner value tables: `first_vertex..+vertices`.
+    pub first_vertex: usize,
+    pub vertices: usize,
+    pub material: Option<usize>,
+    pub has_normal: bool,
+    pub has_uv: bool,
+    pub has_color: bool,
+}
+
+/// glTF extras: the document and its buffers as read, and where each triangle came
+/// from (see `io::gltf`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct GltfExtras {
+    /// The JSON document as read.
+    pub json: serde_json::Value,
+    /// Every buffer's bytes, by buffer index.
+    pub buffers: Vec<Vec<u8>>,
+    /// The buffer that is the GLB binary chunk, when read from a `.glb`.
+    pub glb_bin: Option<usize>,
+    /// The mesh whose triangles were read.
+    pub mesh: usize,
+    pub prims: Vec<GltfPrim>,
+    /// Per triangle read, its corners' glTF vertices (local to its primitive).
+    pub corners: Vec<[u32; 3]>,
+    /// Set by the repair for the output: per output face, the triangle read that it
+    /// is (`None`: a new face)...
+    pub out_faces: Vec<Option<u32>>,
+    /// ... and the primitive (index into `prims`) a new face joins.
+    pub out_prim: Vec<u32>,
+}
+
+impl GltfExtras {
+    /// The primitive (index into `prims`) of triangle `j` as read.
+    pub fn prim_of(&self, j: usize) -> Option<u32> {
+        let k = self.prims.partition_point(|p| p.first_face <= j);
+        let p = self.prims.get(k.checked_sub(1)?)?;
+        (j < p.first_face + p.faces).then_some((k - 1) as u32)
+    }
+}
+
 /// Everything a file carried besides positions, faces and [`RawMesh::colors`].
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Attrs {
@@ -330,6 +378,7 @@ pub struct Attrs {
     pub obj: Option<ObjExtras>,
     pub ply: Option<PlyExtras>,
     pub stl: Option<StlExtras>,
+    pub gltf: Option<GltfExtras>,
 }
 
 impl Attrs {
@@ -342,6 +391,7 @@ impl Attrs {
             && self.obj.is_none()
             && self.ply.is_none()
             && self.stl.is_none()
+            && self.gltf.is_none()
     }
 
     /// Names of what is carried, for the repair log (`vertex red (uchar)`,
@@ -389,6 +439,14 @@ impl Attrs {
         }
         if self.stl.is_some() {
             out.push("STL header and facet attribute bytes".into());
+        }
+        if let Some(g) = &self.gltf {
+            out.push(format!(
+                "glTF document (mesh {}, {} triangle primitive(s), materials, textures, nodes, {} buffer(s))",
+                g.mesh,
+                g.prims.len(),
+                g.buffers.len()
+            ));
         }
         out
     }
@@ -487,6 +545,8 @@ pub fn dropped(raw: &RawMesh, format: Format) -> Vec<Dropped> {
                 || matches!(p.name.as_str(), "s" | "t")
         }
         Format::Stl => false,
+        // glTF: COLOR_0 (written from the vertex colours)
+        Format::Gltf | Format::Glb => false,
     };
     for p in a.vertex.iter().filter(|p| !vertex_ok(p)) {
         drop(
@@ -511,7 +571,7 @@ pub fn dropped(raw: &RawMesh, format: Format) -> Vec<Dropped> {
             "has no per-corner texture coordinates",
         );
     }
-    if a.normals.is_some() && format != Format::Obj {
+    if a.normals.is_some() && !matches!(format, Format::Obj | Format::Gltf | Format::Glb) {
         drop("corner normals".into(), "has no per-corner normals");
     }
     if let Some(o) = &a.obj {
@@ -542,6 +602,12 @@ pub fn dropped(raw: &RawMesh, format: Format) -> Vec<Dropped> {
                 drop(format!("PLY element {name}"), "has no other elements");
             }
         }
+    }
+    if a.gltf.is_some() && !matches!(format, Format::Gltf | Format::Glb) {
+        drop(
+            "glTF materials, textures, nodes and the rest of the document".into(),
+            "has no place for them",
+        );
     }
     if a.stl.is_some() && format != Format::Stl {
         drop(

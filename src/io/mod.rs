@@ -1,4 +1,4 @@
-//! Reading and writing triangle meshes: OBJ, PLY, STL, OFF.
+//! Reading and writing triangle meshes: OBJ, PLY, STL, OFF, glTF 2.0 (`.gltf`, `.glb`).
 //!
 //! Readers produce a [`RawMesh`] (a triangle soup with what the file said about
 //! precision and encoding); writers take one back. The mesh builder
@@ -31,6 +31,10 @@ pub enum Format {
     Ply,
     Stl,
     Off,
+    /// glTF 2.0 as JSON (`.gltf`, buffers beside it or in `data:` URIs).
+    Gltf,
+    /// glTF 2.0 binary (`.glb`).
+    Glb,
 }
 
 impl Format {
@@ -46,6 +50,8 @@ impl Format {
             "ply" => Some(Format::Ply),
             "stl" => Some(Format::Stl),
             "off" => Some(Format::Off),
+            "gltf" => Some(Format::Gltf),
+            "glb" => Some(Format::Glb),
             _ => None,
         }
     }
@@ -56,6 +62,8 @@ impl Format {
             Format::Ply => "ply",
             Format::Stl => "stl",
             Format::Off => "off",
+            Format::Gltf => "gltf",
+            Format::Glb => "glb",
         }
     }
 }
@@ -119,7 +127,7 @@ pub enum IoError {
         message: String,
     },
     /// The extension (or `--format`) names no supported format.
-    #[error("{path}: unsupported format (expected .obj, .ply, .stl or .off)")]
+    #[error("{path}: unsupported format (expected .obj, .ply, .stl, .off, .gltf or .glb)")]
     UnknownFormat { path: PathBuf },
 }
 
@@ -133,6 +141,7 @@ impl IoError {
 
 mod atomic;
 pub mod attrs;
+mod gltf;
 mod obj;
 mod off;
 mod ply;
@@ -292,6 +301,13 @@ fn read_source<R: std::io::BufRead>(
         Format::Ply => ply::read(path, reader, len, &caps)?,
         Format::Stl => stl::read(path, reader, len, &caps)?,
         Format::Off => off::read(path, reader, len, &caps)?,
+        Format::Gltf | Format::Glb => {
+            let mut reader = reader;
+            let mut bytes = Vec::with_capacity(usize::try_from(len).unwrap_or(0).min(1 << 30));
+            std::io::Read::read_to_end(&mut reader, &mut bytes)
+                .map_err(|e| read_error(path, e, "the glTF file"))?;
+            gltf::read(path, &bytes, &caps)?
+        }
     };
     check_read(path, &raw)?;
     attrs::check(&raw).map_err(|m| malformed(path, None, m))?;
@@ -317,6 +333,8 @@ pub fn write(path: &Path, raw: &RawMesh, format: Option<Format>) -> Result<(), I
         Format::Ply => ply::write(w, raw),
         Format::Stl => stl::write(w, raw),
         Format::Off => off::write(w, raw),
+        Format::Gltf => gltf::write(w, raw, false),
+        Format::Glb => gltf::write(w, raw, true),
     })
 }
 

@@ -49,6 +49,7 @@ pub fn carry(mesh: &Mesh, input: &RawMesh) -> (RawMesh, AttributesReport) {
         || a.uv.is_some()
         || a.normals.is_some()
         || a.obj.is_some()
+        || a.gltf.is_some()
         || input.colors.is_some()
         || a.stl.as_ref().is_some_and(|s| !s.attribute.is_empty());
     if !per_element {
@@ -160,6 +161,32 @@ pub fn carry(mesh: &Mesh, input: &RawMesh) -> (RawMesh, AttributesReport) {
         });
     }
     out.attrs.ply = a.ply.clone();
+    if let Some(g) = &a.gltf {
+        // which triangle read each output face is; the primitive a new face joins
+        let pick = ctx.patch_pick(|j| g.prim_of(j).map(u64::from));
+        let out_faces: Vec<Option<u32>> = ctx
+            .face_src
+            .iter()
+            .map(|s| s.map(|(j, _)| j as u32))
+            .collect();
+        let out_prim = (0..ctx.face_src.len())
+            .map(|f| {
+                let j = ctx.face_src[f].map(|(j, _)| j).or(pick(f));
+                j.and_then(|j| g.prim_of(j)).unwrap_or(0)
+            })
+            .collect();
+        if new_faces && g.prims.len() > 1 {
+            rep.interpolated.push(
+                "glTF primitive (material) of new faces: the most common of the faces around the hole"
+                    .into(),
+            );
+        }
+        out.attrs.gltf = Some(crate::io::attrs::GltfExtras {
+            out_faces,
+            out_prim,
+            ..g.clone()
+        });
+    }
 
     // corner values
     if let Some(uv) = &a.uv {

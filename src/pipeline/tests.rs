@@ -236,7 +236,11 @@ fn cracks_and_zero_area_loops_are_stitched_not_filled() {
         assert_eq!(rep.summary.stitched, stitched, "{d:?}: {:#?}", rep.holes);
         assert_eq!(rep.summary.filled, 3, "{d:?}");
         assert_eq!(rep.summary.failed + rep.summary.skipped, 0, "{d:?}");
-        for h in rep.holes.iter().filter(|h| h.status == HoleStatus::Stitched) {
+        for h in rep
+            .holes
+            .iter()
+            .filter(|h| h.status == HoleStatus::Stitched)
+        {
             assert_eq!(h.added_faces, 0);
             assert!(h.reason.contains("crack"), "{}", h.reason);
         }
@@ -246,9 +250,7 @@ fn cracks_and_zero_area_loops_are_stitched_not_filled() {
         assert_eq!(out.faces[far], three_holes().faces[far]);
         assert_eq!(rep.resolved.stitched_faces, 1, "{d:?}");
         // stitching off: the loops are holes (a patch each, or a skipped piece)
-        let off = Policy::default()
-            .edit(|s| s.crack.stitch = false)
-            .unwrap();
+        let off = Policy::default().edit(|s| s.crack.stitch = false).unwrap();
         let (_, rep) = repair(&raw, &off).unwrap();
         assert_eq!(rep.summary.stitched, 0);
         assert_eq!(rep.summary.holes, 3 + stitched);

@@ -104,7 +104,7 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
 pub fn mesh_ext(name: &str) -> Option<String> {
     let (_, e) = name.rsplit_once('.')?;
     let e = e.to_ascii_lowercase();
-    matches!(e.as_str(), "obj" | "ply" | "stl" | "off").then_some(e)
+    matches!(e.as_str(), "obj" | "ply" | "stl" | "off" | "glb" | "gltf").then_some(e)
 }
 
 /// Checks that a name is a plain file name a worker may create in its own folder:
