@@ -890,7 +890,12 @@ impl Daemon {
         let mut wanted: Vec<(String, Role, String)> = Vec::new();
         for r in &p.refs {
             if is_obj {
-                for n in sets::split_libs(r, |w| std::fs::symlink_metadata(inbox.join(w)).is_ok()) {
+                // a whole name with spaces is looked for only when it is one to follow
+                let exists = |w: &str| {
+                    sets::member_name(w, &mesh).is_ok()
+                        && std::fs::symlink_metadata(inbox.join(w)).is_ok()
+                };
+                for n in sets::split_libs(r, exists) {
                     wanted.push((n, Role::MaterialLibrary, mesh.clone()));
                 }
             } else {
