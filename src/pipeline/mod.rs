@@ -161,6 +161,17 @@ fn fill_all(
     let (mut holes, mut skip, comp) = find_holes(mesh, policy);
     // islands inside holes: removed or bridged (the mesh changes), or their hole skipped
     let (changed, notes) = islands::resolve(mesh, &holes, &skip, &comp, policy);
+    // the border rule's decisions are those made before: a loop the islands did not
+    // change keeps its own, a hole joined with its islands is filled (the bridges
+    // can make it the longest loop of the joined piece)
+    let before: Option<crate::fasthash::HashMap<VertexId, Option<String>>> =
+        changed.is_some().then(|| {
+            holes
+                .iter()
+                .zip(&skip)
+                .filter_map(|(h, s)| h.vertices.first().map(|&v| (v, s.clone())))
+                .collect()
+        });
     if let Some(m) = changed {
         *mesh = m;
         (holes, skip, _) = find_holes(mesh, policy);
@@ -183,9 +194,13 @@ fn fill_all(
                 .map(|&n| &notes[n])
         })
         .collect();
-    for (s, note) in skip.iter_mut().zip(&hole_note) {
-        if let (None, Some(reason)) = (&s, note.and_then(|n| n.blocked.clone())) {
-            *s = Some(reason);
+    for ((s, note), hole) in skip.iter_mut().zip(&hole_note).zip(&holes) {
+        if let Some(n) = note {
+            *s = n.blocked.clone();
+        } else if let Some(before) = &before {
+            if let Some(old) = hole.vertices.iter().find_map(|v| before.get(v)) {
+                s.clone_from(old);
+            }
         }
     }
     // about one check per hole to fill (more for holes whose first patch fails)

@@ -301,8 +301,8 @@ fn island_policy(mode: IslandMode, below: usize) -> Policy {
 
 #[test]
 fn an_island_is_bridged_and_filled_with_its_hole_never_capped() {
-    // an annulus (a 12x12 grid with a hole of radius 4.5) around a disk of 3x3 cells
-    let raw = holed_grid(12, 4.5, &[([6.0, 6.0], 1.6)]);
+    // an annulus (a 20x20 grid with a hole of radius 4.5) around a disk of 12 cells
+    let raw = holed_grid(20, 4.5, &[([10.0, 10.0], 1.6)]);
     let (m, _) = Mesh::from_raw(&raw);
     assert_eq!(m.topo.boundary_loops().len(), 3, "border, hole, island");
     let (out, rep) = repair(&raw, &island_policy(IslandMode::Bridge, 0)).unwrap();
@@ -326,7 +326,7 @@ fn an_island_is_bridged_and_filled_with_its_hole_never_capped() {
 
 #[test]
 fn two_islands_are_bridged_into_one_loop() {
-    let raw = holed_grid(16, 6.0, &[([5.5, 8.0], 1.3), ([10.5, 8.0], 1.3)]);
+    let raw = holed_grid(24, 6.0, &[([9.5, 12.0], 1.3), ([14.5, 12.0], 1.3)]);
     let (m, _) = Mesh::from_raw(&raw);
     assert_eq!(m.topo.boundary_loops().len(), 4);
     let (out, rep) = repair(&raw, &island_policy(IslandMode::Bridge, 0)).unwrap();
@@ -341,13 +341,13 @@ fn two_islands_are_bridged_into_one_loop() {
 
 #[test]
 fn small_islands_are_removed_and_large_ones_block_their_hole_in_remove_mode() {
-    let raw = holed_grid(16, 6.0, &[([5.5, 8.0], 1.3), ([10.5, 8.0], 1.3)]);
+    let raw = holed_grid(24, 6.0, &[([9.5, 12.0], 1.3), ([14.5, 12.0], 1.3)]);
     // both islands below the count: removed, the hole filled as a disk
     let (out, rep) = repair(&raw, &island_policy(IslandMode::Remove, 1000)).unwrap();
     assert_sound(&raw, &out, &rep);
     let (m, _) = Mesh::from_raw(&raw);
     let island_faces = m.num_faces() - {
-        let (big, _) = Mesh::from_raw(&holed_grid(16, 6.0, &[]));
+        let (big, _) = Mesh::from_raw(&holed_grid(24, 6.0, &[]));
         big.num_faces()
     };
     let h: Vec<_> = rep
