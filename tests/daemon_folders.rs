@@ -21,7 +21,7 @@ fn an_outbox_removed_while_running_is_made_again() {
         "{}",
         d.log()
     );
-    fs::remove_dir_all(&f.outbox).unwrap();
+    remove_while_written(&f.outbox);
     drop_renamed(&f.inbox, "second.obj", &obj);
     assert!(
         wait_until(LONG, || f.outbox.join("second.obj.repair.json").is_file()),
@@ -37,7 +37,7 @@ fn an_outbox_removed_while_running_is_made_again() {
 
     // the outbox cannot be made (a file in its place): files wait in the inbox, with
     // an error that is not repeated every second
-    fs::remove_dir_all(&f.outbox).unwrap();
+    remove_while_written(&f.outbox);
     fs::write(&f.outbox, "in the way").unwrap();
     drop_renamed(&f.inbox, "third.obj", &obj);
     std::thread::sleep(Duration::from_secs(4));
@@ -58,6 +58,22 @@ fn an_outbox_removed_while_running_is_made_again() {
     assert!(d.alive());
     d.signal("TERM");
     assert_eq!(d.wait_exit(LONG).and_then(|s| s.code()), Some(0));
+}
+
+/// Removes a folder the daemon may be writing into at the same moment (its index page
+/// is written after each file): a file made meanwhile fails `remove_dir_all` with
+/// "directory not empty", so it is tried again.
+fn remove_while_written(p: &std::path::Path) {
+    let mut last = None;
+    for _ in 0..50 {
+        match fs::remove_dir_all(p) {
+            Ok(()) => return,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return,
+            Err(e) => last = Some(e),
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    panic!("cannot remove {}: {last:?}", p.display());
 }
 
 /// Starts `holefill watch` with these folders (relative ones from `f.root()`) and
