@@ -271,7 +271,9 @@ fn a_name_that_is_not_utf8_goes_to_failed_with_the_reason() {
     assert!(f.processing().is_empty());
     // the journal line follows the log file (published first)
     assert!(
-        wait_until(LONG, || d.log().contains(&format!("{shown} failed at name"))),
+        wait_until(LONG, || d
+            .log()
+            .contains(&format!("{shown} failed at name"))),
         "{}",
         d.log()
     );

@@ -3,74 +3,16 @@
 //! a picture beside every repaired file's log, every file in `index.html`.
 
 mod daemon_support;
+mod metrics_support;
 
 use daemon_support::*;
+use metrics_support::*;
 use serde_json::Value;
 use std::collections::HashMap;
 use std::fs;
-use std::io::{Read, Write};
-use std::net::TcpStream;
-use std::time::{Duration, Instant, SystemTime};
+use std::time::{Duration, Instant};
 
 const LONG: Duration = Duration::from_secs(90);
-
-/// A free port on the loopback interface.
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
-/// `GET path`: status line and body.
-fn get(port: u16, path: &str) -> (String, String) {
-    let mut s = TcpStream::connect(("127.0.0.1", port)).expect("connect to the metrics port");
-    s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
-    write!(s, "GET {path} HTTP/1.1\r\nHost: localhost\r\n\r\n").unwrap();
-    let mut text = String::new();
-    s.read_to_string(&mut text).unwrap();
-    let (head, body) = text.split_once("\r\n\r\n").unwrap_or((&text, ""));
-    (
-        head.lines().next().unwrap_or("").to_string(),
-        body.to_string(),
-    )
-}
-
-fn scrape(port: u16) -> String {
-    let (status, body) = get(port, "/metrics");
-    assert_eq!(status, "HTTP/1.1 200 OK");
-    body
-}
-
-/// The value of the sample `name` (with its labels exactly as written), if present.
-fn sample(text: &str, name: &str) -> Option<f64> {
-    text.lines()
-        .find_map(|l| l.strip_prefix(name).and_then(|r| r.strip_prefix(' ')))
-        .map(|v| v.trim().parse().unwrap_or_else(|_| panic!("{name}: {v}")))
-}
-
-fn must(text: &str, name: &str) -> f64 {
-    sample(text, name).unwrap_or_else(|| panic!("no sample {name} in\n{text}"))
-}
-
-/// Every sample of a metric family: labels text -> value.
-fn family(text: &str, name: &str) -> HashMap<String, f64> {
-    text.lines()
-        .filter_map(|l| l.strip_prefix(name)?.strip_prefix('{'))
-        .filter_map(|r| {
-            let (labels, v) = r.split_once("} ")?;
-            Some((labels.to_string(), v.trim().parse().ok()?))
-        })
-        .collect()
-}
-
-fn now_secs() -> f64 {
-    SystemTime::now()
-        .duration_since(SystemTime::UNIX_EPOCH)
-        .unwrap()
-        .as_secs_f64()
-}
 
 #[test]
 fn every_counter_matches_a_run_of_20_files_with_2_failing() {

@@ -4,6 +4,7 @@
 //! worker's log. Against a real nats-server; ignored where none is installed.
 
 mod daemon_support;
+mod metrics_support;
 mod worker_support;
 use daemon_support::{drop_renamed, Daemon, Folders};
 use std::time::Duration;

@@ -3,7 +3,9 @@
 //! SIGKILL mid-repair, the server restarted mid-run, a file that crashes its worker
 //! every time. Ignored where no nats-server is installed (`.ci/run` installs it).
 
+mod metrics_support;
 mod worker_support;
+use metrics_support::*;
 use std::collections::HashMap;
 use std::time::Duration;
 use worker_support::*;
@@ -75,7 +77,11 @@ fn three_workers_200_scans_each_repaired_exactly_once() {
         assert_eq!(log["stage"], "input", "{log}");
         assert!(!log["error"].as_str().unwrap().is_empty());
         // the submitted file comes back with its log
-        assert!(out.path().join("failed").join(format!("bad{i}.obj")).is_file());
+        assert!(out
+            .path()
+            .join("failed")
+            .join(format!("bad{i}.obj"))
+            .is_file());
     }
     // each scan repaired by exactly one worker, exactly once
     let mut count: HashMap<String, usize> = HashMap::new();
@@ -90,7 +96,11 @@ fn three_workers_200_scans_each_repaired_exactly_once() {
         assert_eq!(count.get(k), Some(&1), "{k}");
     }
     // all three took part
-    assert!(workers.iter().all(|w| !w.repaired().is_empty()), "{}", dump());
+    assert!(
+        workers.iter().all(|w| !w.repaired().is_empty()),
+        "{}",
+        dump()
+    );
 }
 
 #[test]
@@ -105,7 +115,11 @@ fn a_worker_killed_mid_repair_has_its_scan_redelivered_and_repaired_once() {
         &["--ack-wait-secs", "2"],
         &[("HOLEFILL_TEST_SLOW", "slow:30000")],
     );
-    assert!(wait_until(Duration::from_secs(20), || a.is_ready()), "{}", a.log());
+    assert!(
+        wait_until(Duration::from_secs(20), || a.is_ready()),
+        "{}",
+        a.log()
+    );
     let keys = submit(&nats, &files);
     // A has taken it: its child is asleep
     assert!(
@@ -147,7 +161,14 @@ fn a_file_that_crashes_its_worker_every_time_fails_after_max_deliver() {
     let poison = src.path().join("poison.obj");
     std::fs::write(&poison, holed_obj(99)).unwrap();
     files.insert(3, poison);
-    let args = ["--max-deliver", "3", "--backoff-secs", "1", "--ack-wait-secs", "5"];
+    let args = [
+        "--max-deliver",
+        "3",
+        "--backoff-secs",
+        "1",
+        "--ack-wait-secs",
+        "5",
+    ];
     let env = [("HOLEFILL_TEST_CRASH_ON", "poison")];
     let w1 = Worker::start(&nats, &args, &env);
     let w2 = Worker::start(&nats, &args, &env);
@@ -167,10 +188,7 @@ fn a_file_that_crashes_its_worker_every_time_fails_after_max_deliver() {
     assert_eq!(log["status"], "failed");
     assert_eq!(log["stage"], "worker", "{log}");
     assert_eq!(log["worker"]["delivery"], 3, "{log}");
-    assert!(
-        log["error"].as_str().unwrap().contains("signal 9"),
-        "{log}"
-    );
+    assert!(log["error"].as_str().unwrap().contains("signal 9"), "{log}");
     // three attempts, each logged as a retry or the final failure
     let attempts = [&w1, &w2]
         .iter()
@@ -234,4 +252,127 @@ fn a_server_restart_mid_run_loses_nothing() {
         assert_eq!(l[&format!("r{i:03}.obj.repair.json")]["status"], "repaired");
     }
     assert!(logs(&out.path().join("failed")).is_empty());
+}
+
+#[test]
+#[cfg_attr(not(has_nats_server), ignore = "needs nats-server")]
+fn worker_metrics_match_a_run_of_20_scans_with_2_failing() {
+    let nats = Nats::start();
+    let port = free_port();
+    let addr = format!("127.0.0.1:{port}");
+    let start = now_secs();
+    let args = [
+        "--metrics",
+        &addr,
+        "--max-deliver",
+        "2",
+        "--backoff-secs",
+        "1",
+        "--ack-wait-secs",
+        "10",
+    ];
+    let w = Worker::start(&nats, &args, &[("HOLEFILL_TEST_CRASH_ON", "crash")]);
+    assert!(
+        wait_until(Duration::from_secs(30), || w.is_ready()),
+        "{}",
+        w.log()
+    );
+    let before = scrape(port);
+    assert_eq!(must(&before, "holefill_attempts_total"), 0.0, "{before}");
+    assert!(before.contains("service=\"worker\""), "{before}");
+
+    let src = tempfile::tempdir().unwrap();
+    let mut files = write_meshes(src.path(), "good", 18);
+    let bad = src.path().join("bad.obj");
+    std::fs::write(&bad, "v 0 0 0\nv 1 0 0\nf 1 2 9\n").unwrap();
+    let crash = src.path().join("crash.obj");
+    std::fs::write(&crash, holed_obj(77)).unwrap();
+    files.push(bad);
+    files.push(crash);
+    let bytes: u64 = files
+        .iter()
+        .map(|p| std::fs::metadata(p).unwrap().len())
+        .sum();
+    assert_eq!(submit(&nats, &files).len(), 20);
+
+    let mut seen_busy = false;
+    let done = wait_until(Duration::from_secs(120), || {
+        let t = scrape(port);
+        if must(&t, "holefill_files_in_flight") > 0.0 {
+            seen_busy = true;
+        }
+        family(&t, "holefill_files_total").values().sum::<f64>() >= 20.0
+    });
+    assert!(done, "{}", w.log());
+    assert!(seen_busy, "a scrape during the run saw a scan in flight");
+    // the queue drains: nothing waits (polled every 2 s)
+    assert!(
+        wait_until(Duration::from_secs(10), || must(
+            &scrape(port),
+            "holefill_files_waiting"
+        ) == 0.0),
+        "{}",
+        scrape(port)
+    );
+
+    let t = scrape(port);
+    assert_eq!(
+        must(&t, "holefill_files_total{outcome=\"repaired\"}"),
+        18.0,
+        "{t}"
+    );
+    assert_eq!(must(&t, "holefill_files_total{outcome=\"failed\"}"), 2.0);
+    assert_eq!(
+        must(&t, "holefill_file_failures_total{stage=\"input\"}"),
+        1.0
+    );
+    assert_eq!(
+        must(&t, "holefill_file_failures_total{stage=\"worker\"}"),
+        1.0
+    );
+    assert_eq!(family(&t, "holefill_file_failures_total").len(), 2);
+    // 18 good and the malformed one once each, the crashing one on both deliveries
+    assert_eq!(must(&t, "holefill_attempts_total"), 21.0);
+    assert_eq!(must(&t, "holefill_worker_crashes_total"), 2.0);
+    assert_eq!(must(&t, "holefill_worker_timeouts_total"), 0.0);
+    assert_eq!(must(&t, "holefill_retries_total{reason=\"crashed\"}"), 1.0);
+    assert_eq!(
+        family(&t, "holefill_retries_total").len(),
+        1,
+        "no other retry"
+    );
+    assert_eq!(must(&t, "holefill_repair_duration_seconds_count"), 20.0);
+    assert_eq!(must(&t, "holefill_file_size_bytes_count"), 20.0);
+    assert_eq!(must(&t, "holefill_file_size_bytes_sum"), bytes as f64);
+    assert_eq!(must(&t, "holefill_files_in_flight"), 0.0);
+    let last = must(&t, "holefill_last_success_timestamp_seconds");
+    assert!(
+        last >= start && last <= now_secs(),
+        "{last} not in [{start}, now]"
+    );
+
+    // faces and holes: what the 18 repair logs say
+    let out = tempfile::tempdir().unwrap();
+    results(&nats, out.path());
+    let repaired = logs(out.path());
+    assert_eq!(repaired.len(), 18);
+    let mut faces = 0.0;
+    let mut want: HashMap<String, f64> = HashMap::new();
+    for log in repaired.values() {
+        faces += log["before"]["faces"].as_f64().unwrap();
+        for h in log["holes"].as_array().unwrap() {
+            let s = |k: &str| h[k].as_str().unwrap_or("none").to_string();
+            let key = format!(
+                "status=\"{}\",class=\"{}\",method=\"{}\"",
+                s("status"),
+                s("class"),
+                s("method")
+            );
+            *want.entry(key).or_default() += 1.0;
+        }
+    }
+    assert_eq!(must(&t, "holefill_file_faces_count"), 18.0);
+    assert_eq!(must(&t, "holefill_file_faces_sum"), faces);
+    assert!(!want.is_empty());
+    assert_eq!(family(&t, "holefill_holes_total"), want);
 }

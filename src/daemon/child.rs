@@ -67,7 +67,10 @@ pub enum ChildEnd {
     SpawnError(io::Error),
     /// Repaired elsewhere and failed there (the gateway: a queue worker's outcome),
     /// with the stage and error of the worker's log.
-    Remote { stage: String, error: String },
+    Remote {
+        stage: String,
+        error: String,
+    },
 }
 
 /// Runs `holefill fill INPUT OUT --input-format EXT --report LOG` under the limits of

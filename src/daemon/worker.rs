@@ -182,8 +182,14 @@ pub async fn process(ctx: Arc<RunCtx>, job: Job, mut cancel: watch::Receiver<boo
     let (end, stderr) = match &ctx.forward {
         // the gateway: repaired by a queue worker, its outcome written as the child's
         Some(f) => {
-            f.repair(&job.name.to_string_lossy(), &file, &out, &child_log, &mut cancel)
-                .await
+            f.repair(
+                &job.name.to_string_lossy(),
+                &file,
+                &out,
+                &child_log,
+                &mut cancel,
+            )
+            .await
         }
         None => {
             let spec = child::Spec {

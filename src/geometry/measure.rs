@@ -209,4 +209,3 @@ mod tests {
         assert_eq!(quality(a, DVec3::X, DVec3::X * 2.0), 0.0);
     }
 }
-

@@ -39,8 +39,8 @@ pub fn read_set(paths: &[PathBuf], origin: Option<String>) -> Result<(ScanMsg, V
         contents.push(bytes);
     }
     let now = crate::daemon::fsops::rfc3339(std::time::SystemTime::now());
-    let msg = ScanMsg::new(entries, now, origin)
-        .map_err(|e| anyhow!("{}: {e}", paths[0].display()))?;
+    let msg =
+        ScanMsg::new(entries, now, origin).map_err(|e| anyhow!("{}: {e}", paths[0].display()))?;
     Ok((msg, contents))
 }
 
@@ -227,12 +227,14 @@ pub async fn fetch_result(
         contents.push(get_bytes(bucket, &object, 16 << 30).await?);
     }
     let short = &done.digest[..done.digest.len().min(12)];
-    let taken_by_other = done.files.iter().zip(&contents).any(|(f, bytes)| {
-        match std::fs::read(dir.join(f)) {
-            Ok(have) => &have != bytes,
-            Err(_) => false,
-        }
-    });
+    let taken_by_other =
+        done.files
+            .iter()
+            .zip(&contents)
+            .any(|(f, bytes)| match std::fs::read(dir.join(f)) {
+                Ok(have) => &have != bytes,
+                Err(_) => false,
+            });
     let mut log_path = PathBuf::new();
     for (f, bytes) in done.files.iter().zip(&contents) {
         let name = if taken_by_other {
@@ -241,8 +243,7 @@ pub async fn fetch_result(
             f.clone()
         };
         let path = dir.join(&name);
-        holefill::io::write_atomic(&path, bytes)
-            .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+        holefill::io::write_atomic(&path, bytes).map_err(|e| anyhow!("{}: {e}", path.display()))?;
         log_path = path;
     }
     Ok(log_path)

@@ -27,6 +27,9 @@ pub struct NatsFile {
     pub backoff_max_secs: Option<u64>,
     pub duplicate_window_secs: Option<u64>,
     pub max_age_days: Option<u64>,
+    /// `holefill worker` serves Prometheus metrics here (`HOST:PORT` or a port on
+    /// loopback); off when absent. (The daemon's own key is the top-level `metrics`.)
+    pub worker_metrics: Option<String>,
 }
 
 /// Every name on the server, each configurable.
@@ -102,7 +105,8 @@ impl NatsFile {
         for (key, v) in [("subject", &n.subject), ("done_subject", &n.done_subject)] {
             if v.is_empty()
                 || v.split('.').any(|t| t.is_empty())
-                || v.bytes().any(|b| b.is_ascii_whitespace() || b == b'*' || b == b'>')
+                || v.bytes()
+                    .any(|b| b.is_ascii_whitespace() || b == b'*' || b == b'>')
             {
                 bail!("nats.{key} = {v:?}: a subject of dot-separated tokens, no wildcards");
             }

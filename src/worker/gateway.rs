@@ -124,7 +124,9 @@ impl Forwarder {
         if let Ok(mut w) = self.waiters.lock() {
             w.insert(key.clone(), notify.clone());
         }
-        let r = self.submit_and_wait(&msg, &bytes, &notify, out, log, cancel).await;
+        let r = self
+            .submit_and_wait(&msg, &bytes, &notify, out, log, cancel)
+            .await;
         if let Ok(mut w) = self.waiters.lock() {
             w.remove(&key);
         }
@@ -150,8 +152,14 @@ impl Forwarder {
                 Ok(Some(end)) => return end,
                 Ok(None) if !submitted => {
                     let contents = [bytes.to_vec()];
-                    match super::client::submit(&self.conn, &self.names, &self.buckets, msg, &contents)
-                        .await
+                    match super::client::submit(
+                        &self.conn,
+                        &self.names,
+                        &self.buckets,
+                        msg,
+                        &contents,
+                    )
+                    .await
                     {
                         Ok(s) => {
                             submitted = true;
@@ -204,7 +212,10 @@ impl Forwarder {
                         ChildEnd::Exit(code)
                     } else {
                         let stage = v["stage"].as_str().unwrap_or("worker").to_string();
-                        ChildEnd::Remote { stage, error: error.clone() }
+                        ChildEnd::Remote {
+                            stage,
+                            error: error.clone(),
+                        }
                     };
                     write(log, &text)?;
                     return Ok(Some((end, error.into_bytes())));

@@ -136,6 +136,10 @@ pub struct WorkerArgs {
     /// in $TMPDIR, removed at exit].
     #[arg(long)]
     pub work_dir: Option<PathBuf>,
+    /// Serve Prometheus metrics at http://ADDR/metrics (e.g. 127.0.0.1:9465, or a
+    /// port on loopback) [default: config `nats.worker_metrics`, else off].
+    #[arg(long, value_name = "ADDR")]
+    pub metrics: Option<String>,
 }
 
 /// `holefill submit`.
@@ -219,10 +223,21 @@ pub fn run_worker(args: WorkerArgs) -> Result<()> {
         n => n,
     };
     let grace = Duration::from_secs(args.grace_secs.or(f.grace_secs).unwrap_or(30));
+    let metrics_addr = match args
+        .metrics
+        .as_deref()
+        .or(loaded.nats.worker_metrics.as_deref())
+    {
+        Some(a) => Some(crate::daemon::config::metrics_addr(a)?),
+        None => None,
+    };
     let pid = std::process::id();
     let instance = format!("{:016x}", rand::random::<u64>());
     let (work_dir, remove_dir) = match &args.work_dir {
-        Some(d) => (d.join(format!("holefill-worker-{pid}-{}", &instance[..8])), true),
+        Some(d) => (
+            d.join(format!("holefill-worker-{pid}-{}", &instance[..8])),
+            true,
+        ),
         None => (
             std::env::temp_dir().join(format!("holefill-worker-{pid}-{}", &instance[..8])),
             true,
@@ -246,10 +261,19 @@ pub fn run_worker(args: WorkerArgs) -> Result<()> {
         .unwrap_or_else(|_| "unknown".into());
     let rt = runtime()?;
     let r = rt.block_on(async {
+        if let Some(addr) = metrics_addr {
+            let m = crate::metrics::init("worker");
+            let bound = crate::metrics::serve(addr, m)
+                .await
+                .with_context(|| format!("cannot serve the metrics on {addr}"))?;
+            tracing::info!("metrics at http://{bound}/metrics");
+        }
         let conn = queue::connect(&loaded.url, "holefill-worker").await?;
-        let buckets = queue::retry("the queue's streams and buckets", Duration::from_secs(3600), || {
-            queue::setup(&conn, &names, &queue_settings)
-        })
+        let buckets = queue::retry(
+            "the queue's streams and buckets",
+            Duration::from_secs(3600),
+            || queue::setup(&conn, &names, &queue_settings),
+        )
         .await?;
         let ctx = Arc::new(work::WorkerCtx {
             conn,
@@ -282,7 +306,9 @@ pub fn run_submit(args: SubmitArgs) -> Result<()> {
     let loaded = args.nats.load()?;
     let names = loaded.nats.names()?;
     let settings = loaded.nats.settings()?;
-    let origin = hostname::get().ok().map(|h| h.to_string_lossy().into_owned());
+    let origin = hostname::get()
+        .ok()
+        .map(|h| h.to_string_lossy().into_owned());
     // every file read and checked before anything is sent
     let sets: Vec<Vec<PathBuf>> = if args.set {
         vec![args.files.clone()]
@@ -325,7 +351,10 @@ pub fn run_results(args: ResultsArgs) -> Result<()> {
     let settings = loaded.nats.settings()?;
     let dirs = client::ResultDirs {
         out: args.dir.clone(),
-        failed: args.failed.clone().unwrap_or_else(|| args.dir.join("failed")),
+        failed: args
+            .failed
+            .clone()
+            .unwrap_or_else(|| args.dir.join("failed")),
     };
     let rt = runtime()?;
     rt.block_on(async {

@@ -23,7 +23,9 @@ pub async fn connect(url: &str, name: &str) -> Result<Conn> {
         .reconnect_delay_callback(|n| Duration::from_millis((100 * n as u64).min(2000)))
         .event_callback(|ev| async move {
             match ev {
-                async_nats::Event::Disconnected => tracing::warn!("disconnected from the NATS server"),
+                async_nats::Event::Disconnected => {
+                    tracing::warn!("disconnected from the NATS server")
+                }
                 async_nats::Event::Connected => tracing::info!("connected to the NATS server"),
                 other => tracing::debug!("nats: {other}"),
             }
@@ -143,11 +145,11 @@ pub async fn bucket(c: &Conn, name: &str, s: &QueueSettings) -> Result<object_st
             match c.js.create_object_store(cfg).await {
                 Ok(b) => Ok(b),
                 // made meanwhile by another worker
-                Err(e) => c
-                    .js
-                    .get_object_store(name)
-                    .await
-                    .map_err(|_| anyhow!("object store {name}: {e}")),
+                Err(e) => {
+                    c.js.get_object_store(name)
+                        .await
+                        .map_err(|_| anyhow!("object store {name}: {e}"))
+                }
             }
         }
         Err(e) => Err(anyhow!("object store {name}: {e}")),

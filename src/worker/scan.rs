@@ -146,7 +146,11 @@ pub fn set_digest(files: &[FileEntry]) -> String {
 
 impl ScanMsg {
     /// A job for files already read: the mesh first, then the rest of its set.
-    pub fn new(files: Vec<FileEntry>, submitted: String, origin: Option<String>) -> Result<ScanMsg, ScanError> {
+    pub fn new(
+        files: Vec<FileEntry>,
+        submitted: String,
+        origin: Option<String>,
+    ) -> Result<ScanMsg, ScanError> {
         let first = files.first().ok_or(ScanError::Empty)?;
         let m = ScanMsg {
             version: VERSION,

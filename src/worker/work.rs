@@ -132,7 +132,11 @@ pub async fn slot(
 /// How an attempt ended.
 enum Outcome {
     /// Repaired: the model and its child log in `dir`.
-    Repaired { exit: i32, model: PathBuf, log: Value },
+    Repaired {
+        exit: i32,
+        model: PathBuf,
+        log: Value,
+    },
     /// A permanent failure.
     Failed {
         stage: &'static str,
@@ -142,6 +146,17 @@ enum Outcome {
     },
     /// Retryable (a crash, a kill, a time-out, an I/O error).
     Retry { stage: &'static str, error: String },
+}
+
+impl Outcome {
+    /// The metrics' retry reason of a retryable outcome.
+    fn retry_reason(stage: &str) -> &'static str {
+        if stage == "worker" {
+            "crashed"
+        } else {
+            "retryable"
+        }
+    }
 }
 
 /// Handles one delivery (see the module documentation).
@@ -172,8 +187,15 @@ async fn handle(ctx: &Arc<WorkerCtx>, msg: Arc<jetstream::Message>, cancel: watc
             }
         })
     };
+    let m = crate::metrics::global();
+    if let Some(m) = m {
+        m.in_flight.inc();
+    }
     let r = handle_scan(ctx, &scan, delivered, started, t0, cancel).await;
     ticker.abort();
+    if let Some(m) = m {
+        m.in_flight.dec();
+    }
     match r {
         Ok(Settled::Done(status)) => match msg.double_ack().await {
             Ok(()) => tracing::info!(
@@ -184,6 +206,10 @@ async fn handle(ctx: &Arc<WorkerCtx>, msg: Arc<jetstream::Message>, cancel: watc
             Err(e) => tracing::warn!("{key}: {status}, but the ack failed: {e}"),
         },
         Ok(Settled::Again(why, delay)) => {
+            if let Some(m) = m {
+                m.retry(why.reason);
+            }
+            let why = why.error;
             tracing::warn!(
                 "{key}: {why}; delivery {delivered} of {}, retried in {} s",
                 ctx.queue.max_deliver,
@@ -193,6 +219,9 @@ async fn handle(ctx: &Arc<WorkerCtx>, msg: Arc<jetstream::Message>, cancel: watc
         }
         Err(e) => {
             // the server unreachable, or an upload failed: the outcome is not stored
+            if let Some(m) = m {
+                m.retry("retryable");
+            }
             let delay = ctx.queue.backoff_after(delivered);
             tracing::warn!("{key}: {e:#}; retried in {} s", delay.as_secs());
             let _ = msg.ack_with(AckKind::Nak(Some(delay))).await;
@@ -204,7 +233,14 @@ enum Settled {
     /// Stored (and notified): acknowledge. "repaired", "failed", "already done".
     Done(&'static str),
     /// Negatively acknowledge with this delay.
-    Again(String, Duration),
+    Again(Retry, Duration),
+}
+
+/// Why a delivery is tried again: the error, and the metrics' reason (`crashed`: the
+/// repair process crashed, was killed or timed out; `retryable`: anything else).
+struct Retry {
+    error: String,
+    reason: &'static str,
 }
 
 async fn handle_scan(
@@ -244,8 +280,17 @@ async fn handle_scan(
             "no outcome after {} deliveries: the worker died (killed, crashed or cut off) on each",
             ctx.queue.max_deliver
         );
-        let log = final_log(None, "failed", Some("worker"), Some(&error), info("failed", None));
+        let log = final_log(
+            None,
+            "failed",
+            Some("worker"),
+            Some(&error),
+            info("failed", None),
+        );
         store_failed(ctx, scan, None, log, "worker", &error).await?;
+        if let Some(m) = crate::metrics::global() {
+            m.failed("worker", t0.elapsed().as_secs_f64(), None);
+        }
         return Ok(Settled::Done("failed"));
     }
     tracing::info!("taken {} (delivery {delivered})", scan.key());
@@ -253,10 +298,30 @@ async fn handle_scan(
         .work_dir
         .join(ctx.seq.fetch_add(1, Ordering::Relaxed).to_string());
     let r = attempt(ctx, scan, &dir, cancel).await;
+    let m = crate::metrics::global();
+    let bytes = scan
+        .files
+        .iter()
+        .find(|f| f.name == scan.scan)
+        .map(|f| f.size);
+    let failed = |stage: &str| {
+        if let Some(m) = m {
+            m.failed(stage, t0.elapsed().as_secs_f64(), bytes);
+        }
+    };
     let settled = match r {
         Outcome::Repaired { exit, model, log } => {
-            let log = final_log(Some(log), "repaired", None, None, info("repaired", Some(exit)));
-            store_repaired(ctx, scan, &dir, &model, log).await?;
+            let log = final_log(
+                Some(log),
+                "repaired",
+                None,
+                None,
+                info("repaired", Some(exit)),
+            );
+            store_repaired(ctx, scan, &dir, &model, &log).await?;
+            if let Some(m) = m {
+                m.repaired(Some(&log), t0.elapsed().as_secs_f64(), bytes);
+            }
             Settled::Done("repaired")
         }
         Outcome::Failed {
@@ -265,8 +330,15 @@ async fn handle_scan(
             exit,
             log,
         } => {
-            let log = final_log(log, "failed", Some(stage), Some(&error), info("failed", exit));
+            let log = final_log(
+                log,
+                "failed",
+                Some(stage),
+                Some(&error),
+                info("failed", exit),
+            );
             store_failed(ctx, scan, Some(&dir.join("in")), log, stage, &error).await?;
+            failed(stage);
             Settled::Done("failed")
         }
         Outcome::Retry { stage, error } => {
@@ -275,11 +347,19 @@ async fn handle_scan(
                     "{error} (delivery {delivered} of {}; giving up)",
                     ctx.queue.max_deliver
                 );
-                let log = final_log(None, "failed", Some(stage), Some(&error), info("failed", None));
+                let log = final_log(
+                    None,
+                    "failed",
+                    Some(stage),
+                    Some(&error),
+                    info("failed", None),
+                );
                 store_failed(ctx, scan, Some(&dir.join("in")), log, stage, &error).await?;
+                failed(stage);
                 Settled::Done("failed")
             } else {
-                Settled::Again(error, ctx.queue.backoff_after(delivered))
+                let reason = Outcome::retry_reason(stage);
+                Settled::Again(Retry { error, reason }, ctx.queue.backoff_after(delivered))
             }
         }
     };
@@ -305,7 +385,11 @@ async fn stored_outcome(ctx: &WorkerCtx, scan: &ScanMsg) -> Result<Option<DoneMs
                     _ => {
                         // which of the submitted files were kept with the log
                         for f in &scan.files {
-                            if bucket.info(scan.object(&f.name)).await.is_ok_and(|i| !i.deleted) {
+                            if bucket
+                                .info(scan.object(&f.name))
+                                .await
+                                .is_ok_and(|i| !i.deleted)
+                            {
                                 files.push(f.name.clone());
                             }
                         }
@@ -485,7 +569,13 @@ async fn attempt(
             .ok()
             .and_then(|b| serde_json::from_slice::<Value>(&b).ok())
     };
-    let or = |s: &str, d: &str| if s.is_empty() { d.to_string() } else { s.to_string() };
+    let or = |s: &str, d: &str| {
+        if s.is_empty() {
+            d.to_string()
+        } else {
+            s.to_string()
+        }
+    };
     match end {
         ChildEnd::Exit(code @ (0 | 2)) => match (model.is_file(), read_log()) {
             (true, Some(log)) => Outcome::Repaired {
@@ -526,10 +616,18 @@ async fn attempt(
             stage: "worker",
             error: "the worker is stopping".into(),
         },
-        end => Outcome::Retry {
-            stage: "worker",
-            error: child::crash_reason(ctx.limits.memory_limit_mb, end, &msg),
-        },
+        end => {
+            if let Some(m) = crate::metrics::global() {
+                match end {
+                    ChildEnd::Timeout(_) => m.timeouts.inc(),
+                    _ => m.crashes.inc(),
+                };
+            }
+            Outcome::Retry {
+                stage: "worker",
+                error: child::crash_reason(ctx.limits.memory_limit_mb, end, &msg),
+            }
+        }
     }
 }
 
@@ -634,18 +732,22 @@ async fn store_repaired(
     scan: &ScanMsg,
     dir: &Path,
     model: &Path,
-    log: Value,
+    log: &Value,
 ) -> Result<()> {
     let b = &ctx.buckets.results;
     put_file(b, &scan.object(&scan.scan), model).await?;
     for f in &scan.files[1..] {
         put_file(b, &scan.object(&f.name), &dir.join("in").join(&f.name)).await?;
     }
-    let text = serde_json::to_vec_pretty(&log)?;
+    let text = serde_json::to_vec_pretty(log)?;
     put_bytes(b, &scan.object(&scan.log_name()), &text).await?;
     let mut files: Vec<String> = scan.files.iter().map(|f| f.name.clone()).collect();
     files.push(scan.log_name());
-    notify(ctx, &done_msg(scan, "repaired", &ctx.names.results, files, None, None)).await
+    notify(
+        ctx,
+        &done_msg(scan, "repaired", &ctx.names.results, files, None, None),
+    )
+    .await
 }
 
 /// The submitted files that were downloaded (from `input`), then the log; notifies.
@@ -717,6 +819,19 @@ pub async fn run(ctx: Arc<WorkerCtx>, slots: usize, grace: Duration) -> Result<(
     .await?;
     let (stop_tx, stop_rx) = watch::channel(false);
     let (cancel_tx, cancel_rx) = watch::channel(false);
+    // the metrics' waiting files: the scans of the queue not yet handed to a worker
+    let poll = crate::metrics::global().map(|m| {
+        let c = consumer.clone();
+        tokio::spawn(async move {
+            loop {
+                if let Ok(i) = c.get_info().await {
+                    m.waiting
+                        .set(i64::try_from(i.num_pending).unwrap_or(i64::MAX));
+                }
+                tokio::time::sleep(Duration::from_secs(2)).await;
+            }
+        })
+    });
     let mut tasks = Vec::new();
     for _ in 0..slots {
         tasks.push(tokio::spawn(slot(
@@ -740,13 +855,19 @@ pub async fn run(ctx: Arc<WorkerCtx>, slots: usize, grace: Duration) -> Result<(
         _ = term.recv() => {}
         _ = tokio::signal::ctrl_c() => {}
     }
-    tracing::info!("stopping: no new scans; running repairs get {} s", grace.as_secs());
+    tracing::info!(
+        "stopping: no new scans; running repairs get {} s",
+        grace.as_secs()
+    );
     let _ = stop_tx.send(true);
     let all = futures_util::future::join_all(tasks);
     tokio::pin!(all);
     if tokio::time::timeout(grace, &mut all).await.is_err() {
         let _ = cancel_tx.send(true);
         let _ = all.await;
+    }
+    if let Some(p) = poll {
+        p.abort();
     }
     Ok(())
 }

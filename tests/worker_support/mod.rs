@@ -6,7 +6,7 @@
 use serde_json::Value;
 use std::collections::HashMap;
 use std::fs;
-use std::net::{TcpListener, TcpStream};
+use std::net::TcpStream;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -59,7 +59,14 @@ impl Nats {
             .open(&self.log)
             .unwrap();
         let child = Command::new(nats_server_bin())
-            .args(["-js", "-a", "127.0.0.1", "-p", &self.port.to_string(), "-sd"])
+            .args([
+                "-js",
+                "-a",
+                "127.0.0.1",
+                "-p",
+                &self.port.to_string(),
+                "-sd",
+            ])
             .arg(&js)
             .stdout(Stdio::from(log.try_clone().unwrap()))
             .stderr(Stdio::from(log))
@@ -106,12 +113,8 @@ impl Drop for Nats {
     }
 }
 
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .map(|a| a.port())
-        .expect("a free port")
-}
+// every test crate that includes this module includes metrics_support too
+use super::metrics_support::free_port;
 
 /// A `holefill worker` process; killed when dropped. Its stderr goes to a file.
 pub struct Worker {
@@ -126,13 +129,20 @@ impl Worker {
         let log = dir.path().join("worker.log");
         let f = fs::File::create(&log).unwrap();
         let mut cmd = Command::new(bin());
-        cmd.args(["worker", "--nats", &nats.url(), "--workers", "1", "--work-dir"])
-            .arg(dir.path())
-            .args(args)
-            .env("RUST_LOG", "info,async_nats=warn")
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::from(f));
+        cmd.args([
+            "worker",
+            "--nats",
+            &nats.url(),
+            "--workers",
+            "1",
+            "--work-dir",
+        ])
+        .arg(dir.path())
+        .args(args)
+        .env("RUST_LOG", "info,async_nats=warn")
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::from(f));
         for (k, v) in env {
             cmd.env(k, v);
         }
@@ -299,7 +309,11 @@ pub fn holed_obj(i: usize) -> String {
         let k = (a.min(b), a.max(b));
         *mid.entry(k).or_insert_with(|| {
             let (p, q) = (v[a], v[b]);
-            let c = [(p[0] + q[0]) / 2.0 - i as f64, (p[1] + q[1]) / 2.0, (p[2] + q[2]) / 2.0];
+            let c = [
+                (p[0] + q[0]) / 2.0 - i as f64,
+                (p[1] + q[1]) / 2.0,
+                (p[2] + q[2]) / 2.0,
+            ];
             let l = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
             v.push([c[0] / l + i as f64, c[1] / l, c[2] / l]);
             v.len() - 1

@@ -311,7 +311,6 @@ fn second_plane(s: &Segmentation, p: &Predicted) -> bool {
     }
 }
 
-
 fn dist_to_segment(a: DVec2, b: DVec2, q: DVec2) -> f64 {
     let ab = b - a;
     let l2 = ab.length_squared();

@@ -533,9 +533,9 @@ impl Front {
             if self.edges.contains(&edge_key(lp[i0], lp[i2])) {
                 continue;
             }
-            if (0..m).any(|t| {
-                t != i0 && t != j && t != i2 && strictly_inside(q[t], q[i0], q[j], q[i2])
-            }) {
+            if (0..m)
+                .any(|t| t != i0 && t != j && t != i2 && strictly_inside(q[t], q[i0], q[j], q[i2]))
+            {
                 continue;
             }
             let a = measure::angles(pts[i0], pts[j], pts[i2]);
