@@ -1,5 +1,6 @@
 use super::blocks::{index, real, Piece};
 use super::*;
+use crate::io::text::UTF8_BOM;
 use crate::io::ReadLimits;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
