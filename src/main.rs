@@ -288,6 +288,7 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
             let method = h.method.map(|m| m.name()).unwrap_or("-");
             let status = match h.status {
                 HoleStatus::Filled => "filled",
+                HoleStatus::Stitched => "stitched",
                 HoleStatus::Skipped => "skipped",
                 HoleStatus::Failed => "FAILED",
             };
@@ -311,8 +312,14 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
         }
         let s = &report.summary;
         println!(
-            "total: {} holes, {} filled, {} skipped, {} failed; {} -> {} faces",
-            s.holes, s.filled, s.skipped, s.failed, report.before.faces, report.after.faces
+            "total: {} holes, {} filled, {} stitched, {} skipped, {} failed; {} -> {} faces",
+            s.holes,
+            s.filled,
+            s.stitched,
+            s.skipped,
+            s.failed,
+            report.before.faces,
+            report.after.faces
         );
     }
     println!(

@@ -32,6 +32,9 @@ impl HoleClass {
 #[serde(rename_all = "lowercase")]
 pub enum HoleStatus {
     Filled,
+    /// A crack zipped shut: its vertices identified with the coincident boundary
+    /// vertices across it (`[crack]`), no patch.
+    Stitched,
     Skipped,
     Failed,
 }
@@ -115,6 +118,11 @@ pub struct Resolved {
     pub long_edges_split: usize,
     /// Degenerate boundary loops (fewer than 3 vertices) that cannot be filled.
     pub degenerate_loops: usize,
+    /// Boundary vertices identified with a coincident boundary vertex (`[crack]`);
+    /// each stays in the output, unreferenced.
+    pub stitched_vertices: usize,
+    /// Input faces whose corners changed by that identification.
+    pub stitched_faces: usize,
 }
 
 /// Durations in milliseconds.
@@ -142,6 +150,7 @@ pub struct FileRef {
 pub struct Summary {
     pub holes: usize,
     pub filled: usize,
+    pub stitched: usize,
     pub skipped: usize,
     pub failed: usize,
 }
@@ -216,6 +225,7 @@ impl RepairReport {
         for h in &self.holes {
             match h.status {
                 HoleStatus::Filled => s.filled += 1,
+                HoleStatus::Stitched => s.stitched += 1,
                 HoleStatus::Skipped => s.skipped += 1,
                 HoleStatus::Failed => s.failed += 1,
             }

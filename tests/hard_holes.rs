@@ -89,7 +89,7 @@ fn run_case_out(name: &str, s: &Soup) -> (serde_json::Value, RawMesh) {
     for h in hs {
         let status = h["status"].as_str().unwrap_or("");
         assert!(
-            ["filled", "failed", "skipped"].contains(&status),
+            ["filled", "stitched", "failed", "skipped"].contains(&status),
             "{name}: status {status}"
         );
         if status != "filled" {

@@ -100,7 +100,7 @@ impl Picture {
 /// The colour of a hole's outline and label.
 pub fn status_color(s: HoleStatus) -> [u8; 3] {
     match s {
-        HoleStatus::Filled => FILLED,
+        HoleStatus::Filled | HoleStatus::Stitched => FILLED,
         HoleStatus::Skipped => SKIPPED,
         HoleStatus::Failed => FAILED,
     }
@@ -206,6 +206,7 @@ pub fn render(mesh: &RawMesh, report: &RepairReport, opts: &Options) -> Picture 
         pic.text(x + 4, y + 3, &format!("#{} before", h.id), TEXT, 1);
         let status = match h.status {
             HoleStatus::Filled => "filled",
+            HoleStatus::Stitched => "stitched",
             HoleStatus::Skipped => "skipped",
             HoleStatus::Failed => "failed",
         };
@@ -514,6 +515,10 @@ fn header(pic: &mut Panel, report: &RepairReport, shown: usize) {
     put(pic, &format!("{} holes: ", s.holes.max(shown)), TEXT);
     put(pic, &format!("{} filled", s.filled), FILLED);
     put(pic, ", ", TEXT);
+    if s.stitched > 0 {
+        put(pic, &format!("{} stitched", s.stitched), FILLED);
+        put(pic, ", ", TEXT);
+    }
     put(pic, &format!("{} skipped", s.skipped), SKIPPED);
     put(pic, ", ", TEXT);
     put(pic, &format!("{} failed", s.failed), FAILED);
@@ -529,7 +534,7 @@ fn header(pic: &mut Panel, report: &RepairReport, shown: usize) {
 fn choose_closeups(holes: &[HoleView], max: usize) -> Vec<usize> {
     let rank = |s: HoleStatus| match s {
         HoleStatus::Failed => 0,
-        HoleStatus::Filled => 1,
+        HoleStatus::Filled | HoleStatus::Stitched => 1,
         HoleStatus::Skipped => 2,
     };
     let mut order: Vec<usize> = (0..holes.len())

@@ -1,10 +1,12 @@
 //! One repair, from a triangle soup to a repaired soup and its log: the mesh is
-//! built (scan defects resolved and reported), the boundary cleaned and the mesh
+//! built (scan defects resolved and reported), cracks zipped ([`stitch`]), the
+//! boundary cleaned and the mesh
 //! smoothed when the policy says so, every boundary loop becomes a [`Hole`] (or is
 //! skipped by the outer-border rule), and the holes are filled by
 //! [`crate::fill::dispatch`] in its two phases.
 
 pub mod clean;
+pub mod stitch;
 
 use crate::check::Checker;
 use crate::fill::dispatch::{self, parallel};
@@ -35,6 +37,7 @@ pub enum RepairError {
 /// first, unmoved unless smoothing is on) and the repair log.
 pub fn repair(raw: &RawMesh, policy: &Policy) -> Result<(RawMesh, RepairReport), RepairError> {
     let mut report = RepairReport::new(policy);
+    let mut stitched_loops: Vec<Vec<VertexId>> = Vec::new();
     report.resolved.reader = raw.notes.clone();
     let (mut mesh, build) = Mesh::from_raw(raw);
     report.resolved.mesh = build;
@@ -43,6 +46,45 @@ pub fn repair(raw: &RawMesh, policy: &Policy) -> Result<(RawMesh, RepairReport),
     }
     mesh.validate()?;
     report.before = counts(&mesh);
+
+    // cracks: zipped, their loops logged "stitched" after the holes
+    let mut stitched: Vec<HoleReport> = Vec::new();
+    let t_stitch = Instant::now();
+    if policy.crack.stitch {
+        if let Some(s) = stitch::stitch(&mesh, policy.crack.tolerance) {
+            report.resolved.stitched_vertices = s.vertices_merged;
+            report.resolved.stitched_faces = s.faces_changed;
+            for (lp, merged) in s.closed {
+                let hole = Hole::new(0, &mesh, lp, policy);
+                stitched.push(HoleReport {
+                    id: 0,
+                    boundary_vertices: hole.len(),
+                    perimeter: hole.perimeter,
+                    mean_edge_length: hole.mean_edge_length,
+                    class: hole.class,
+                    method: None,
+                    tried: Vec::new(),
+                    status: HoleStatus::Stitched,
+                    reason: format!(
+                        "a crack: {merged} of its {} vertices coincide with boundary vertices \
+                         across it (crack.tolerance = {} of the local edge length) and were \
+                         identified with them; no faces added",
+                        hole.len(),
+                        policy.crack.tolerance
+                    ),
+                    added_vertices: 0,
+                    added_faces: 0,
+                    rim_faces_removed: 0,
+                    quality: None,
+                    ms: 0.0,
+                });
+                stitched_loops.push(hole.vertices);
+            }
+            mesh = s.mesh;
+            mesh.validate()?;
+        }
+    }
+    let stitch_ms = t_stitch.elapsed().as_secs_f64() * 1000.0;
 
     if policy.clean.remove_teeth {
         let (m, removed) = remove_teeth(mesh);
@@ -69,7 +111,16 @@ pub fn repair(raw: &RawMesh, policy: &Policy) -> Result<(RawMesh, RepairReport),
         &mut report.resolved.degenerate_loops,
         &mut report.traces,
     );
-    report.timings.fill_ms = t.elapsed().as_secs_f64() * 1000.0;
+    report.timings.fill_ms = stitch_ms + t.elapsed().as_secs_f64() * 1000.0;
+    let end = mesh.num_faces() as u32;
+    for (mut h, lp) in stitched.into_iter().zip(stitched_loops) {
+        h.id = report.holes.len();
+        report.holes.push(h);
+        report.traces.push(HoleTrace {
+            boundary: lp.iter().map(|v| v.0).collect(),
+            patch: end..end,
+        });
+    }
     report.after = counts(&mesh);
     report.summarise();
     let t = Instant::now();

@@ -133,6 +133,12 @@ enum Defect {
     Pinch(usize),
     /// An unreferenced vertex.
     Unreferenced,
+    /// Face `i` cut loose: its three corners replaced by copies at the same positions
+    /// (a crack of coincident vertices all round it).
+    Crack(usize),
+    /// The first corner of face `i` replaced by a copy at the same position: a loop of
+    /// zero area (two slits) around it.
+    Slit(usize),
 }
 
 fn inject(raw: &mut RawMesh, d: &Defect) {
@@ -162,6 +168,14 @@ fn inject(raw: &mut RawMesh, d: &Defect) {
             raw.faces.push([v, k - 2, k - 1]);
         }
         Defect::Unreferenced => raw.positions.push(DVec3::new(3.0, 3.0, 3.0)),
+        Defect::Crack(i) | Defect::Slit(i) => {
+            let corners = if matches!(d, Defect::Crack(_)) { 3 } else { 1 };
+            for c in 0..corners {
+                let v = raw.faces[i % n][c];
+                raw.positions.push(raw.positions[v as usize]);
+                raw.faces[i % n][c] = raw.positions.len() as u32 - 1;
+            }
+        }
     }
 }
 
@@ -172,6 +186,8 @@ fn defect() -> impl Strategy<Value = Defect> {
         (0usize..2000, 0usize..3).prop_map(|(i, e)| Defect::Flap(i, e)),
         (0usize..2000).prop_map(Defect::Pinch),
         Just(Defect::Unreferenced),
+        (0usize..2000).prop_map(Defect::Crack),
+        (0usize..2000).prop_map(Defect::Slit),
     ]
 }
 
@@ -190,6 +206,52 @@ fn each_defect_alone_is_repaired() {
         let (out, rep) = repair(&raw, &Policy::default()).unwrap_or_else(|e| panic!("{d:?}: {e}"));
         assert_sound(&raw, &out, &rep);
         assert_eq!(rep.summary.failed, 0, "{d:?}: {:#?}", rep.holes);
+    }
+}
+
+/// The face of `raw` whose centroid is nearest the direction `dir`.
+fn face_toward(raw: &RawMesh, dir: DVec3) -> usize {
+    let c = |f: &[u32; 3]| f.iter().map(|&v| raw.positions[v as usize]).sum::<DVec3>();
+    (0..raw.faces.len())
+        .max_by(|&a, &b| {
+            let (x, y) = (c(&raw.faces[a]).normalize(), c(&raw.faces[b]).normalize());
+            x.dot(dir).total_cmp(&y.dot(dir))
+        })
+        .unwrap()
+}
+
+#[test]
+fn cracks_and_zero_area_loops_are_stitched_not_filled() {
+    let clean = repair(&three_holes(), &Policy::default()).unwrap().0;
+    let far = face_toward(&three_holes(), DVec3::new(-1.0, 0.3, 0.2).normalize());
+    // a face cut loose: the triangle hole and the loose face's border; a slit corner:
+    // one loop of zero area
+    for (d, stitched) in [(Defect::Crack(far), 2), (Defect::Slit(far), 1)] {
+        let mut raw = three_holes();
+        inject(&mut raw, &d);
+        let (m, _) = Mesh::from_raw(&raw);
+        assert_eq!(m.topo.boundary_loops().len(), 3 + stitched, "{d:?}");
+        let (out, rep) = repair(&raw, &Policy::default()).unwrap();
+        assert_sound(&raw, &out, &rep);
+        assert_eq!(rep.summary.stitched, stitched, "{d:?}: {:#?}", rep.holes);
+        assert_eq!(rep.summary.filled, 3, "{d:?}");
+        assert_eq!(rep.summary.failed + rep.summary.skipped, 0, "{d:?}");
+        for h in rep.holes.iter().filter(|h| h.status == HoleStatus::Stitched) {
+            assert_eq!(h.added_faces, 0);
+            assert!(h.reason.contains("crack"), "{}", h.reason);
+        }
+        // no patch over the crack: the same faces as the repair without it, the cut
+        // face back on the input's vertices
+        assert_eq!(out.faces.len(), clean.faces.len(), "{d:?}");
+        assert_eq!(out.faces[far], three_holes().faces[far]);
+        assert_eq!(rep.resolved.stitched_faces, 1, "{d:?}");
+        // stitching off: the loops are holes (a patch each, or a skipped piece)
+        let off = Policy::default()
+            .edit(|s| s.crack.stitch = false)
+            .unwrap();
+        let (_, rep) = repair(&raw, &off).unwrap();
+        assert_eq!(rep.summary.stitched, 0);
+        assert_eq!(rep.summary.holes, 3 + stitched);
     }
 }
 

@@ -85,6 +85,7 @@ pub struct Settings {
     pub border: Border,
     pub clean: Clean,
     pub rim: Rim,
+    pub crack: Crack,
     pub refine: Refine,
     pub fair: Fair,
     pub front: Front,

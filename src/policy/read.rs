@@ -33,6 +33,7 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
     ),
     ("clean", &["remove_teeth", "split_long_edges"]),
     ("rim", &["trim", "max_rings", "max_faces"]),
+    ("crack", &["stitch", "tolerance"]),
     ("refine", &["density", "weight", "restricted_search_above"]),
     ("fair", &["continuity", "weights", "tangential_relax"]),
     (
@@ -340,6 +341,8 @@ impl Reader<'_> {
             ("rim", "trim") => p.rim.trim = self.boolean(key, v)?,
             ("rim", "max_rings") => p.rim.max_rings = self.usize(key, v)?,
             ("rim", "max_faces") => p.rim.max_faces = self.usize(key, v)?,
+            ("crack", "stitch") => p.crack.stitch = self.boolean(key, v)?,
+            ("crack", "tolerance") => p.crack.tolerance = self.float(key, v)?,
             ("refine", "density") => p.refine.density = self.float(key, v)?,
             ("refine", "weight") => p.refine.weight = self.named(key, v)?,
             ("refine", "restricted_search_above") => {

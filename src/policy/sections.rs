@@ -112,6 +112,28 @@ impl Default for Rim {
     }
 }
 
+/// Cracks (issue 17): boundary vertices that coincide with another boundary vertex
+/// are identified, zipping the crack shut instead of filling it (the loop is logged
+/// `stitched`). Changes the corners of the input faces at the crack (counted in the log).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct Crack {
+    /// Zip cracks before filling.
+    pub stitch: bool,
+    /// Two boundary vertices coincide when they are closer than this share of the
+    /// smaller of their local boundary edge lengths (0: exactly the same position).
+    pub tolerance: f64,
+}
+
+impl Default for Crack {
+    fn default() -> Self {
+        Crack {
+            stitch: true,
+            tolerance: 0.1,
+        }
+    }
+}
+
 /// Weight of the minimum-weight triangulation.
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]

@@ -113,6 +113,8 @@ impl Settings {
             ));
         }
 
+        closed("crack.tolerance", self.crack.tolerance, 0.0, 1.0)?;
+
         let r = &self.refine;
         finite("refine.density", r.density)?;
         if r.density != 0.0 && !(1.0..=4.0).contains(&r.density) {
