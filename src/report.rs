@@ -93,6 +93,11 @@ pub struct HoleReport {
     /// Input faces removed around the hole by rim trimming (`[rim]`) before it was
     /// filled.
     pub rim_faces_removed: usize,
+    /// Faces of islands inside the hole removed as debris (`[islands]`).
+    pub island_faces_removed: usize,
+    /// Islands inside the hole joined to its loop by bridge faces (two each, counted
+    /// in `added_faces`) and filled with it.
+    pub islands_bridged: usize,
     pub quality: Option<PatchQuality>,
     pub ms: f64,
 }
@@ -123,6 +128,10 @@ pub struct Resolved {
     pub stitched_vertices: usize,
     /// Input faces whose corners changed by that identification.
     pub stitched_faces: usize,
+    /// Floating pieces of fewer than `debris.remove_below_faces` faces removed, and
+    /// their faces.
+    pub debris_pieces_removed: usize,
+    pub debris_faces_removed: usize,
 }
 
 /// Durations in milliseconds.

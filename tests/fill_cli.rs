@@ -346,3 +346,92 @@ fn parallel_filling_gives_the_serial_output_byte_for_byte() {
     assert!(outs[0].0 == outs[1].0, "the same output bytes");
     assert_eq!(boundary_edges(&read_obj(&dir.path().join("out1.obj"))), 0);
 }
+
+/// `a` and `b` as one soup, `b`'s vertices after `a`'s (no vertex shared).
+fn joined(a: &Soup, b: &Soup) -> Soup {
+    let mut s = a.clone();
+    let base = s.v.len();
+    s.v.extend_from_slice(&b.v);
+    s.f.extend(b.f.iter().map(|f| f.map(|v| v + base)));
+    s
+}
+
+/// Runs `holefill fill` with the default policy; the output soup and the log.
+fn fill_default(name: &str, s: &Soup) -> (Soup, serde_json::Value) {
+    let dir = tempdir();
+    let inp = dir.path().join(format!("{name}.obj"));
+    let out = dir.path().join("out.obj");
+    let rep = dir.path().join("log.json");
+    write_obj(&inp, s);
+    let o = run(&[
+        "fill",
+        inp.to_str().unwrap(),
+        out.to_str().unwrap(),
+        "--report",
+        rep.to_str().unwrap(),
+    ]);
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{name}: {}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let log = serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+    (read_obj(&out), log)
+}
+
+/// No face of `s` from `first` on meets another face of `s` (vertices compared by
+/// position), by the library's exact predicate.
+fn assert_no_patch_meets(s: &Soup, first: usize) {
+    use holefill::geometry::predicates::tri_tri;
+    let key: Vec<u64> = {
+        let mut of: std::collections::HashMap<[u64; 3], u64> = Default::default();
+        s.v.iter()
+            .enumerate()
+            .map(|(i, p)| *of.entry(p.map(f64::to_bits)).or_insert(i as u64))
+            .collect()
+    };
+    let tri = |f: [usize; 3]| f.map(|v| glam::DVec3::from_array(s.v[v]));
+    let keys = |f: [usize; 3]| f.map(|v| key[v]);
+    for (pi, &p) in s.f.iter().enumerate().skip(first) {
+        for (qi, &q) in s.f.iter().enumerate() {
+            assert!(
+                qi == pi || !tri_tri(&tri(p), &keys(p), &tri(q), &keys(q)),
+                "face {pi} meets face {qi}"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_crack_is_stitched_and_an_island_bridged_never_capped() {
+    // a cap cut loose along a circle, its vertices duplicated: a crack, no hole
+    let s = icosphere(3);
+    let (rest, cap) = cut(&s, [1.0, 0.0, 0.0], 0.4);
+    let cracked = joined(&rest, &cap);
+    assert!(boundary_edges(&cracked) > 0);
+    let (out, log) = fill_default("crack", &cracked);
+    assert_eq!(log["summary"]["stitched"], 2, "{}", log["holes"]);
+    assert_eq!(log["summary"]["filled"], 0);
+    assert_eq!(out.f.len(), cracked.f.len(), "no face added");
+    assert_eq!(boundary_edges(&out), 0);
+
+    // a hole with a piece of the surface left inside it: filled round the island
+    let s = icosphere(4);
+    let (rest, cap) = cut(&s, [0.0, 0.0, 1.0], 0.5);
+    let (_, island) = cut(&cap, [0.0, 0.0, 1.0], 0.2);
+    assert!(island.f.len() >= 10);
+    let holed = joined(&rest, &island);
+    let (out, log) = fill_default("island", &holed);
+    let holes = log["holes"].as_array().unwrap();
+    let filled: Vec<_> = holes.iter().filter(|h| h["status"] == "filled").collect();
+    assert_eq!(filled.len(), 1, "{holes:?}");
+    assert_eq!(filled[0]["islands_bridged"], 1);
+    assert_eq!(boundary_edges(&out), 0, "closed, island and all");
+    assert_eq!(
+        out.f.len(),
+        holed.f.len() + filled[0]["added_faces"].as_u64().unwrap() as usize
+    );
+    assert_no_patch_meets(&out, holed.f.len());
+}

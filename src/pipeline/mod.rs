@@ -6,6 +6,7 @@
 //! [`crate::fill::dispatch`] in its two phases.
 
 pub mod clean;
+pub mod islands;
 pub mod stitch;
 
 use crate::check::Checker;
@@ -75,6 +76,8 @@ pub fn repair(raw: &RawMesh, policy: &Policy) -> Result<(RawMesh, RepairReport),
                     added_vertices: 0,
                     added_faces: 0,
                     rim_faces_removed: 0,
+                    island_faces_removed: 0,
+                    islands_bridged: 0,
                     quality: None,
                     ms: 0.0,
                 });
@@ -83,6 +86,14 @@ pub fn repair(raw: &RawMesh, policy: &Policy) -> Result<(RawMesh, RepairReport),
             mesh = s.mesh;
             mesh.validate()?;
         }
+    }
+    if let Some((m, pieces, faces)) =
+        islands::remove_debris(&mesh, policy.debris.remove_below_faces)
+    {
+        mesh = m;
+        report.resolved.debris_pieces_removed = pieces;
+        report.resolved.debris_faces_removed = faces;
+        mesh.validate()?;
     }
     let stitch_ms = t_stitch.elapsed().as_secs_f64() * 1000.0;
 
@@ -147,7 +158,123 @@ fn fill_all(
     degenerate: &mut usize,
     traces: &mut Vec<HoleTrace>,
 ) -> Vec<HoleReport> {
-    let input_faces = mesh.num_faces();
+    let (mut holes, mut skip, comp) = find_holes(mesh, policy);
+    // islands inside holes: removed or bridged (the mesh changes), or their hole skipped
+    let (changed, notes) = islands::resolve(mesh, &holes, &skip, &comp, policy);
+    // the border rule's decisions are those made before: a loop the islands did not
+    // change keeps its own, a hole joined with its islands is filled (the bridges
+    // can make it the longest loop of the joined piece)
+    let before: Option<crate::fasthash::HashMap<VertexId, Option<String>>> =
+        changed.is_some().then(|| {
+            holes
+                .iter()
+                .zip(&skip)
+                .filter_map(|(h, s)| h.vertices.first().map(|&v| (v, s.clone())))
+                .collect()
+        });
+    if let Some(m) = changed {
+        *mesh = m;
+        (holes, skip, _) = find_holes(mesh, policy);
+    }
+    let bridged: usize = notes.iter().map(|n| n.bridged).sum();
+    // the bridges' faces are the first ones added
+    let input_faces = mesh.num_faces() - 2 * bridged;
+    let mut note_of: crate::fasthash::HashMap<VertexId, usize> = Default::default();
+    for (n, note) in notes.iter().enumerate() {
+        for &v in &note.outer {
+            note_of.insert(v, n);
+        }
+    }
+    let hole_note: Vec<Option<&islands::Note>> = holes
+        .iter()
+        .map(|h| {
+            h.vertices
+                .iter()
+                .find_map(|v| note_of.get(v))
+                .map(|&n| &notes[n])
+        })
+        .collect();
+    for ((s, note), hole) in skip.iter_mut().zip(&hole_note).zip(&holes) {
+        if let Some(n) = note {
+            *s = n.blocked.clone();
+        } else if let Some(before) = &before {
+            if let Some(old) = hole.vertices.iter().find_map(|v| before.get(v)) {
+                s.clone_from(old);
+            }
+        }
+    }
+    // about one check per hole to fill (more for holes whose first patch fails)
+    let to_fill = skip.iter().filter(|s| s.is_none()).count();
+    let mut checker = Checker::for_checks(mesh, to_fill);
+    // phase 1, in parallel: every hole's first acceptable patch against the mesh as it
+    // is now (read-only); phase 2, serial in hole order: check each against the
+    // patches accepted before it and apply it. The output does not depend on threads.
+    let proposals = parallel::propose_all(mesh, &holes, &skip, policy, &checker);
+    let (nv, nf) = proposals
+        .iter()
+        .flatten()
+        .filter_map(|p| p.accepted.as_ref())
+        .fold((0, 0), |(v, f), (_, patch, _, _)| {
+            (v + patch.new_vertices.len(), f + patch.triangles.len())
+        });
+    mesh.reserve(nv, nf);
+    let mut out = Vec::with_capacity(holes.len());
+    traces.reserve(holes.len());
+    for ((hole, rule), proposal) in holes.iter().zip(skip).zip(proposals) {
+        if hole.len() < 3 {
+            *degenerate += 1;
+        }
+        // patches are appended to the faces, one hole after the other
+        let first_face = mesh.num_faces() as u32;
+        match (rule, proposal) {
+            (Some(rule), _) => out.push(HoleReport {
+                id: hole.id,
+                boundary_vertices: hole.len(),
+                perimeter: hole.perimeter,
+                mean_edge_length: hole.mean_edge_length,
+                class: hole.class,
+                method: None,
+                tried: Vec::new(),
+                status: HoleStatus::Skipped,
+                reason: rule,
+                added_vertices: 0,
+                added_faces: 0,
+                rim_faces_removed: 0,
+                island_faces_removed: 0,
+                islands_bridged: 0,
+                quality: None,
+                ms: 0.0,
+            }),
+            (None, Some(p)) => out.push(dispatch::finish_hole(mesh, hole, policy, &mut checker, p)),
+            (None, None) => out.push(dispatch::fill_hole(mesh, hole, policy, &mut checker)),
+        }
+        traces.push(HoleTrace {
+            boundary: hole.vertices.iter().map(|v| v.0).collect(),
+            patch: first_face..(mesh.num_faces() as u32).max(first_face),
+        });
+    }
+    if policy.rim.trim {
+        trim_failed(mesh, &holes, &mut out, traces, policy, input_faces);
+    }
+    for (rep, note) in out.iter_mut().zip(&hole_note) {
+        if let Some(n) = note {
+            rep.island_faces_removed = n.faces_removed;
+            rep.islands_bridged = n.bridged;
+            rep.added_faces += 2 * n.bridged;
+            if n.bridged > 0 && rep.status == HoleStatus::Filled && rep.reason.is_empty() {
+                rep.reason = format!(
+                    "filled as one patch with {} island(s) bridged to its loop",
+                    n.bridged
+                );
+            }
+        }
+    }
+    out
+}
+
+/// The holes of the mesh as it is, the border rule's reason for each loop it skips,
+/// and the connected piece of every face.
+fn find_holes(mesh: &Mesh, policy: &Policy) -> (Vec<Hole>, Vec<Option<String>>, Vec<usize>) {
     let loops = mesh.topo.boundary_loops();
     let diag = mesh.bbox_diagonal();
     let holes: Vec<Hole> = loops
@@ -157,15 +284,14 @@ fn fill_all(
         .collect();
     // which holes to fill, and which rule skips the others (the outer border of an
     // open piece); with `only_longest` the rules hold only for the longest loop of
-    // each connected component. The components (a walk over every face) are needed
-    // for the area rule and for `only_longest` when some rule would skip a loop.
+    // each connected component (also the islands' pieces).
     let b = &policy.border;
     let mut skip: Vec<Option<String>> = holes
         .iter()
         .map(|hole| border_rule(mesh, hole, policy, diag))
         .collect();
-    if b.min_area_share > 0.0 || (b.only_longest && skip.iter().any(Option::is_some)) {
-        let comp = components(mesh);
+    let comp = components(mesh);
+    {
         let ncomp = comp.iter().copied().max().map_or(0, |m| m + 1);
         let mut area = vec![0.0f64; ncomp];
         let mut count = vec![0usize; ncomp];
@@ -211,58 +337,7 @@ fn fill_all(
             }
         }
     }
-    // about one check per hole to fill (more for holes whose first patch fails)
-    let to_fill = skip.iter().filter(|s| s.is_none()).count();
-    let mut checker = Checker::for_checks(mesh, to_fill);
-    // phase 1, in parallel: every hole's first acceptable patch against the mesh as it
-    // is now (read-only); phase 2, serial in hole order: check each against the
-    // patches accepted before it and apply it. The output does not depend on threads.
-    let proposals = parallel::propose_all(mesh, &holes, &skip, policy, &checker);
-    let (nv, nf) = proposals
-        .iter()
-        .flatten()
-        .filter_map(|p| p.accepted.as_ref())
-        .fold((0, 0), |(v, f), (_, patch, _, _)| {
-            (v + patch.new_vertices.len(), f + patch.triangles.len())
-        });
-    mesh.reserve(nv, nf);
-    let mut out = Vec::with_capacity(holes.len());
-    traces.reserve(holes.len());
-    for ((hole, rule), proposal) in holes.iter().zip(skip).zip(proposals) {
-        if hole.len() < 3 {
-            *degenerate += 1;
-        }
-        // patches are appended to the faces, one hole after the other
-        let first_face = mesh.num_faces() as u32;
-        match (rule, proposal) {
-            (Some(rule), _) => out.push(HoleReport {
-                id: hole.id,
-                boundary_vertices: hole.len(),
-                perimeter: hole.perimeter,
-                mean_edge_length: hole.mean_edge_length,
-                class: hole.class,
-                method: None,
-                tried: Vec::new(),
-                status: HoleStatus::Skipped,
-                reason: rule,
-                added_vertices: 0,
-                added_faces: 0,
-                rim_faces_removed: 0,
-                quality: None,
-                ms: 0.0,
-            }),
-            (None, Some(p)) => out.push(dispatch::finish_hole(mesh, hole, policy, &mut checker, p)),
-            (None, None) => out.push(dispatch::fill_hole(mesh, hole, policy, &mut checker)),
-        }
-        traces.push(HoleTrace {
-            boundary: hole.vertices.iter().map(|v| v.0).collect(),
-            patch: first_face..(mesh.num_faces() as u32).max(first_face),
-        });
-    }
-    if policy.rim.trim {
-        trim_failed(mesh, &holes, &mut out, traces, policy, input_faces);
-    }
-    out
+    (holes, skip, comp)
 }
 
 /// The last step of the chain: every hole that failed, in hole order, gets its rim

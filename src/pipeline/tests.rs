@@ -6,7 +6,7 @@ use super::repair;
 use crate::geometry::predicates::tri_tri;
 use crate::io::RawMesh;
 use crate::mesh::Mesh;
-use crate::policy::Policy;
+use crate::policy::{IslandMode, Policy};
 use crate::report::{HoleStatus, RepairReport};
 use crate::testutil::icosphere;
 use glam::DVec3;
@@ -236,7 +236,11 @@ fn cracks_and_zero_area_loops_are_stitched_not_filled() {
         assert_eq!(rep.summary.stitched, stitched, "{d:?}: {:#?}", rep.holes);
         assert_eq!(rep.summary.filled, 3, "{d:?}");
         assert_eq!(rep.summary.failed + rep.summary.skipped, 0, "{d:?}");
-        for h in rep.holes.iter().filter(|h| h.status == HoleStatus::Stitched) {
+        for h in rep
+            .holes
+            .iter()
+            .filter(|h| h.status == HoleStatus::Stitched)
+        {
             assert_eq!(h.added_faces, 0);
             assert!(h.reason.contains("crack"), "{}", h.reason);
         }
@@ -246,9 +250,7 @@ fn cracks_and_zero_area_loops_are_stitched_not_filled() {
         assert_eq!(out.faces[far], three_holes().faces[far]);
         assert_eq!(rep.resolved.stitched_faces, 1, "{d:?}");
         // stitching off: the loops are holes (a patch each, or a skipped piece)
-        let off = Policy::default()
-            .edit(|s| s.crack.stitch = false)
-            .unwrap();
+        let off = Policy::default().edit(|s| s.crack.stitch = false).unwrap();
         let (_, rep) = repair(&raw, &off).unwrap();
         assert_eq!(rep.summary.stitched, 0);
         assert_eq!(rep.summary.holes, 3 + stitched);
@@ -270,4 +272,131 @@ proptest! {
         let (out, rep) = r.unwrap();
         assert_sound(&raw, &out, &rep);
     }
+}
+
+/// A flat grid over `[0, n]²` with the cells whose centre lies within `hole` of
+/// `(c, c)` removed, except those within `r` of one of the `islands` centres (pieces
+/// of their own, with no vertex shared with the rest).
+fn holed_grid(n: usize, hole: f64, islands: &[([f64; 2], f64)]) -> RawMesh {
+    let c = n as f64 / 2.0;
+    crate::testutil::cells_removed(
+        crate::testutil::grid(n, 0.0, n as f64, |_, _| 0.0),
+        |i, j| {
+            let (x, y) = (i as f64 + 0.5, j as f64 + 0.5);
+            let in_hole = (x - c).hypot(y - c) < hole;
+            let on_island = islands.iter().any(|(p, r)| (x - p[0]).hypot(y - p[1]) < *r);
+            in_hole && !on_island
+        },
+    )
+}
+
+fn island_policy(mode: IslandMode, below: usize) -> Policy {
+    Policy::default()
+        .edit(|s| {
+            s.islands.mode = mode;
+            s.islands.remove_below_faces = below;
+        })
+        .unwrap()
+}
+
+#[test]
+fn an_island_is_bridged_and_filled_with_its_hole_never_capped() {
+    // an annulus (a 20x20 grid with a hole of radius 4.5) around a disk of 12 cells
+    let raw = holed_grid(20, 4.5, &[([10.0, 10.0], 1.6)]);
+    let (m, _) = Mesh::from_raw(&raw);
+    assert_eq!(m.topo.boundary_loops().len(), 3, "border, hole, island");
+    let (out, rep) = repair(&raw, &island_policy(IslandMode::Bridge, 0)).unwrap();
+    assert_sound(&raw, &out, &rep);
+    let filled: Vec<_> = rep
+        .holes
+        .iter()
+        .filter(|h| h.status == HoleStatus::Filled)
+        .collect();
+    assert_eq!(filled.len(), 1, "{:#?}", rep.holes);
+    assert_eq!(filled[0].islands_bridged, 1);
+    assert_eq!(filled[0].island_faces_removed, 0);
+    // the island's faces are all in the output (none removed) and only the outer
+    // border is open
+    assert_eq!(out.faces.len(), raw.faces.len() + filled[0].added_faces);
+    let (o, _) = Mesh::from_raw(&out);
+    o.validate().unwrap();
+    assert_eq!(o.topo.boundary_loops().len(), 1);
+    assert_eq!(rep.summary.failed, 0);
+}
+
+#[test]
+fn two_islands_are_bridged_into_one_loop() {
+    let raw = holed_grid(24, 6.0, &[([9.5, 12.0], 1.3), ([14.5, 12.0], 1.3)]);
+    let (m, _) = Mesh::from_raw(&raw);
+    assert_eq!(m.topo.boundary_loops().len(), 4);
+    let (out, rep) = repair(&raw, &island_policy(IslandMode::Bridge, 0)).unwrap();
+    assert_sound(&raw, &out, &rep);
+    let bridged: usize = rep.holes.iter().map(|h| h.islands_bridged).sum();
+    assert_eq!(bridged, 2, "{:#?}", rep.holes);
+    assert_eq!(rep.summary.filled, 1);
+    assert_eq!(rep.summary.failed, 0);
+    let (o, _) = Mesh::from_raw(&out);
+    assert_eq!(o.topo.boundary_loops().len(), 1);
+}
+
+#[test]
+fn small_islands_are_removed_and_large_ones_block_their_hole_in_remove_mode() {
+    let raw = holed_grid(24, 6.0, &[([9.5, 12.0], 1.3), ([14.5, 12.0], 1.3)]);
+    // both islands below the count: removed, the hole filled as a disk
+    let (out, rep) = repair(&raw, &island_policy(IslandMode::Remove, 1000)).unwrap();
+    assert_sound(&raw, &out, &rep);
+    let (m, _) = Mesh::from_raw(&raw);
+    let island_faces = m.num_faces() - {
+        let (big, _) = Mesh::from_raw(&holed_grid(24, 6.0, &[]));
+        big.num_faces()
+    };
+    let h: Vec<_> = rep
+        .holes
+        .iter()
+        .filter(|h| h.status == HoleStatus::Filled)
+        .collect();
+    assert_eq!(h.len(), 1, "{:#?}", rep.holes);
+    assert_eq!(h[0].island_faces_removed, island_faces);
+    assert_eq!(rep.summary.holes, 2, "the border and the hole");
+    // above the count in remove mode: the hole is skipped by the island rule
+    let (out, rep) = repair(&raw, &island_policy(IslandMode::Remove, 0)).unwrap();
+    assert_sound(&raw, &out, &rep);
+    assert_eq!(rep.summary.filled, 0, "{:#?}", rep.holes);
+    assert!(rep
+        .holes
+        .iter()
+        .any(|h| h.status == HoleStatus::Skipped && h.reason.starts_with("island inside")));
+    assert_eq!(out.faces.len(), raw.faces.len(), "no cap");
+}
+
+#[test]
+fn floating_debris_is_removed_by_policy_only() {
+    // a holed sphere with two loose triangles and a loose pair of triangles
+    let mut raw = three_holes();
+    for (k, z) in [(0u32, 3.0), (1, 4.0)] {
+        let b = raw.positions.len() as u32;
+        raw.positions.extend([
+            DVec3::new(0.0, 0.0, z),
+            DVec3::new(0.1, 0.0, z),
+            DVec3::new(0.0, 0.1, z),
+            DVec3::new(0.1, 0.1, z),
+        ]);
+        raw.faces.push([b, b + 1, b + 2]);
+        if k == 1 {
+            raw.faces.push([b + 1, b + 3, b + 2]);
+        }
+    }
+    let (out, rep) = repair(&raw, &Policy::default()).unwrap();
+    assert_sound(&raw, &out, &rep);
+    assert_eq!(rep.resolved.debris_faces_removed, 0, "kept by default");
+    assert_eq!(rep.summary.skipped, 2, "their borders");
+    let p = Policy::default()
+        .edit(|s| s.debris.remove_below_faces = 3)
+        .unwrap();
+    let (out, rep) = repair(&raw, &p).unwrap();
+    assert_sound(&raw, &out, &rep);
+    assert_eq!(rep.resolved.debris_pieces_removed, 2);
+    assert_eq!(rep.resolved.debris_faces_removed, 3);
+    assert_eq!(rep.summary.filled, 3);
+    assert_eq!(rep.summary.skipped, 0);
 }

@@ -86,6 +86,8 @@ pub struct Settings {
     pub clean: Clean,
     pub rim: Rim,
     pub crack: Crack,
+    pub islands: Islands,
+    pub debris: Debris,
     pub refine: Refine,
     pub fair: Fair,
     pub front: Front,

@@ -34,6 +34,8 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
     ("clean", &["remove_teeth", "split_long_edges"]),
     ("rim", &["trim", "max_rings", "max_faces"]),
     ("crack", &["stitch", "tolerance"]),
+    ("islands", &["mode", "remove_below_faces"]),
+    ("debris", &["remove_below_faces"]),
     ("refine", &["density", "weight", "restricted_search_above"]),
     ("fair", &["continuity", "weights", "tangential_relax"]),
     (
@@ -343,6 +345,11 @@ impl Reader<'_> {
             ("rim", "max_faces") => p.rim.max_faces = self.usize(key, v)?,
             ("crack", "stitch") => p.crack.stitch = self.boolean(key, v)?,
             ("crack", "tolerance") => p.crack.tolerance = self.float(key, v)?,
+            ("islands", "mode") => p.islands.mode = self.named(key, v)?,
+            ("islands", "remove_below_faces") => {
+                p.islands.remove_below_faces = self.usize(key, v)?
+            }
+            ("debris", "remove_below_faces") => p.debris.remove_below_faces = self.usize(key, v)?,
             ("refine", "density") => p.refine.density = self.float(key, v)?,
             ("refine", "weight") => p.refine.weight = self.named(key, v)?,
             ("refine", "restricted_search_above") => {

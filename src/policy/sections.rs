@@ -134,6 +134,45 @@ impl Default for Crack {
     }
 }
 
+/// What is done with an island that is not removed.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum IslandMode {
+    /// Joined to the hole's loop by two bridge faces, the region filled as one patch.
+    Bridge,
+    /// Only removed (below `remove_below_faces`); a larger island leaves its hole
+    /// skipped.
+    Remove,
+}
+
+/// Islands (issue 17): the border of another piece of surface lying inside a hole.
+/// Never a patch over an island: small ones are removed as debris, larger ones bridged
+/// to the hole's loop (or, when that cannot be done, the hole is skipped).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct Islands {
+    pub mode: IslandMode,
+    /// Islands of fewer faces are removed (counted per hole: `island_faces_removed`).
+    pub remove_below_faces: usize,
+}
+
+impl Default for Islands {
+    fn default() -> Self {
+        Islands {
+            mode: IslandMode::Bridge,
+            remove_below_faces: 10,
+        }
+    }
+}
+
+/// Floating debris (issue 17): connected pieces of fewer faces than this are removed
+/// before filling (0: kept).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, Default)]
+#[serde(default, deny_unknown_fields)]
+pub struct Debris {
+    pub remove_below_faces: usize,
+}
+
 /// Weight of the minimum-weight triangulation.
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
@@ -508,6 +547,16 @@ impl PolicyName for SmoothScope {
         match self {
             SmoothScope::Whole => "whole",
             SmoothScope::Rings => "rings",
+        }
+    }
+}
+
+impl PolicyName for IslandMode {
+    const VALUES: &'static [IslandMode] = &[IslandMode::Bridge, IslandMode::Remove];
+    fn policy_name(self) -> &'static str {
+        match self {
+            IslandMode::Bridge => "bridge",
+            IslandMode::Remove => "remove",
         }
     }
 }

@@ -193,6 +193,8 @@ pub fn finish_hole(
         added_vertices: 0,
         added_faces: 0,
         rim_faces_removed: 0,
+        island_faces_removed: 0,
+        islands_bridged: 0,
         quality: None,
         ms: 0.0,
     };
