@@ -66,3 +66,126 @@ fn files_dropped_into_the_inbox_come_back_through_two_workers() {
     assert!(!a.is_empty() && !b.is_empty(), "{}", dump());
     assert_eq!(a.len() + b.len(), n, "{}", dump());
 }
+
+/// Writes `bytes` as `dir/name` through a dot-file and a rename.
+fn drop_bytes(dir: &std::path::Path, name: &str, bytes: &[u8]) {
+    let tmp = dir.join(format!(".{name}.part"));
+    std::fs::write(&tmp, bytes).unwrap();
+    std::fs::rename(&tmp, dir.join(name)).unwrap();
+}
+
+fn mtllib_of(obj: &str) -> Option<String> {
+    obj.lines()
+        .find_map(|l| l.strip_prefix("mtllib "))
+        .map(|s| s.trim().to_string())
+}
+
+#[test]
+#[cfg_attr(not(has_nats_server), ignore = "needs nats-server")]
+fn a_set_travels_through_the_gateway_together_and_results_keep_sets_whole() {
+    let nats = Nats::start();
+    let w = Worker::start(&nats, &["--ack-wait-secs", "10"], &[]);
+    let f = Folders::new();
+    let d = Daemon::ready(
+        &f,
+        &["--forward", &nats.url(), "--set-wait-secs", "60"],
+        &[],
+    );
+    let obj = format!("mtllib t.mtl\nusemtl skin\n{}", holed_obj(1));
+    let mtl = "newmtl skin\nKd 1 1 1\nmap_Kd -s 1 1 1 t.jpg\n";
+    let jpg: Vec<u8> = (0..2000u32).map(|i| (i * 7 + 1) as u8).collect();
+    // the image and the MTL first, the OBJ last
+    drop_bytes(&f.inbox, "t.jpg", &jpg);
+    drop_renamed(&f.inbox, "t.mtl", mtl);
+    drop_renamed(&f.inbox, "t.obj", &obj);
+    let dump = || format!("daemon:\n{}\nworker:\n{}", d.log(), w.log());
+    assert!(
+        wait_until(Duration::from_secs(60), || f
+            .outbox
+            .join("t.obj.repair.json")
+            .exists()),
+        "{}",
+        dump()
+    );
+    let log = Folders::log(&f.outbox, "t.obj");
+    assert_eq!(log["status"], "repaired", "{log}");
+    // the worker got the whole set as one scan
+    assert_eq!(
+        log["worker"]["files"],
+        serde_json::json!(["t.obj", "t.mtl", "t.jpg"]),
+        "{log}"
+    );
+    let out = std::fs::read_to_string(f.outbox.join("t.obj")).unwrap();
+    assert_eq!(mtllib_of(&out).as_deref(), Some("t.mtl"));
+    assert!(
+        out.lines().filter(|l| l.starts_with("f ")).count()
+            > obj.lines().filter(|l| l.starts_with("f ")).count()
+    );
+    assert_eq!(
+        std::fs::read_to_string(f.outbox.join("t.mtl")).unwrap(),
+        mtl
+    );
+    assert_eq!(std::fs::read(f.outbox.join("t.jpg")).unwrap(), jpg);
+    for n in ["t.obj", "t.mtl", "t.jpg"] {
+        assert!(f.archive.join(n).is_file(), "{n} archived");
+    }
+    assert!(Folders::files(&f.inbox).is_empty());
+
+    // `holefill results` downloads that set; then another set of the same names but
+    // other content: its names are taken, so it goes whole into a folder of its own
+    let dir = f.root().join("results");
+    worker_support::results(&nats, &dir);
+    assert_eq!(std::fs::read(dir.join("t.jpg")).unwrap(), jpg, "{}", dump());
+    let src = f.root().join("second");
+    std::fs::create_dir(&src).unwrap();
+    let jpg2: Vec<u8> = jpg.iter().map(|b| b.wrapping_add(3)).collect();
+    std::fs::write(src.join("t.obj"), &obj).unwrap();
+    std::fs::write(src.join("t.mtl"), mtl).unwrap();
+    std::fs::write(src.join("t.jpg"), &jpg2).unwrap();
+    let out = worker_support::holefill(&[
+        "submit",
+        "--nats",
+        &nats.url(),
+        "--set",
+        &src.join("t.obj").display().to_string(),
+        &src.join("t.mtl").display().to_string(),
+        &src.join("t.jpg").display().to_string(),
+    ]);
+    assert!(out.status.success());
+    let sub = || {
+        std::fs::read_dir(&dir)
+            .ok()?
+            .flatten()
+            .find(|e| {
+                e.file_type().is_ok_and(|t| t.is_dir())
+                    && e.file_name().to_string_lossy().starts_with("t.")
+            })
+            .map(|e| e.path())
+    };
+    assert!(
+        wait_until(Duration::from_secs(60), || {
+            worker_support::results(&nats, &dir);
+            sub().is_some_and(|s| s.join("t.obj.repair.json").exists())
+        }),
+        "results {:?} {:?}\n{}",
+        Folders::entries(&dir),
+        sub().map(|s| Folders::entries(&s)),
+        dump()
+    );
+    let sub = sub().unwrap();
+    assert!(
+        sub.file_name().unwrap().to_string_lossy().starts_with("t."),
+        "{}",
+        sub.display()
+    );
+    let second = std::fs::read_to_string(sub.join("t.obj")).unwrap();
+    let lib = mtllib_of(&second).unwrap();
+    assert_eq!(
+        std::fs::read_to_string(sub.join(&lib)).unwrap(),
+        mtl,
+        "the OBJ's mtllib finds its MTL beside it"
+    );
+    assert_eq!(std::fs::read(sub.join("t.jpg")).unwrap(), jpg2);
+    // the first set is untouched
+    assert_eq!(std::fs::read(dir.join("t.jpg")).unwrap(), jpg);
+}

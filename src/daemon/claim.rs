@@ -37,6 +37,7 @@
 //! count, so a file that kills its worker cannot loop through restarts.
 
 use super::fsops::{self, FileId, Stamp};
+use super::sets::{Member, SetRec};
 use serde::{Deserialize, Serialize};
 use std::ffi::{OsStr, OsString};
 use std::fs;
@@ -517,6 +518,10 @@ pub struct Record {
     pub stamp: Option<Stamp>,
     #[serde(default)]
     pub phase: Phase,
+    /// The other files of its set, claimed beside it (`None`: not a set, or its
+    /// references not read yet).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub set: Option<SetRec>,
 }
 
 impl Record {
@@ -574,6 +579,14 @@ impl Job {
     pub fn record_path(&self) -> PathBuf {
         self.home.dir.join(format!("{}.json", self.id))
     }
+    /// Where member `i` of its set is kept in the processing folder.
+    pub fn member_path(&self, i: usize) -> PathBuf {
+        self.home.dir.join(format!("{}.m{i}", self.id))
+    }
+    /// The members of its set (none for a single file).
+    pub fn members(&self) -> &[Member] {
+        self.rec.set.as_ref().map_or(&[], |s| &s.members)
+    }
     /// A temporary file of this job in its temporary output folder.
     pub fn tmp(&self, suffix: &str) -> PathBuf {
         self.home.tmp.join(format!("{}{suffix}", self.id))
@@ -615,6 +628,94 @@ pub fn is_candidate_name(name: &OsStr) -> bool {
     [&b".obj"[..], b".ply", b".stl", b".off"]
         .iter()
         .any(|e| lower.ends_with(e) && lower.len() > e.len())
+}
+
+/// True for the names the daemon keeps track of: the meshes it takes and the files
+/// that may join a set (any name that is not a dot-file, `*.part`, `*.tmp` or `*~`).
+pub fn is_watched_name(name: &OsStr) -> bool {
+    let b = name.as_bytes();
+    if b.is_empty() || b.starts_with(b".") || b.ends_with(b"~") {
+        return false;
+    }
+    let lower = b.to_ascii_lowercase();
+    !(lower.ends_with(b".part") || lower.ends_with(b".tmp"))
+}
+
+/// Claims the members of a set beside its claimed mesh: the record lists them first
+/// (durably), then each is renamed in with `renameat2(RENAME_NOREPLACE)` and checked
+/// to be the regular file judged complete. `Ok(false)`: one vanished or was swapped
+/// meanwhile; the members claimed are back in the inbox and the record has no set.
+pub fn claim_members(layout: &Layout, job: &mut Job, set: SetRec) -> io::Result<bool> {
+    job.rec.set = Some(set);
+    job.save()?;
+    let n = job.members().len();
+    for i in 0..n {
+        let m = job.members()[i].clone();
+        let dst = job.member_path(i);
+        let r = fsops::rename_noreplace(&layout.inbox.join(&m.name), &dst);
+        let ok = match r {
+            Ok(()) => {
+                fs::symlink_metadata(&dst).is_ok_and(|md| md.is_file() && Stamp::of(&md) == m.stamp)
+            }
+            Err(e) if e.kind() == io::ErrorKind::NotFound => false,
+            Err(e) => {
+                put_back_members(layout, job);
+                return Err(e);
+            }
+        };
+        if !ok {
+            put_back_members(layout, job);
+            return Ok(false);
+        }
+    }
+    Ok(true)
+}
+
+/// Moves the members of a job's set that are in its processing folder back into the
+/// inbox (each under its name, or the collision rule's next one), and drops the set
+/// from its record. Returns the members that could not be moved back (with why).
+pub fn put_back_members(layout: &Layout, job: &mut Job) -> Vec<String> {
+    let mut stuck = Vec::new();
+    let when = SystemTime::now();
+    for (i, m) in job.members().iter().enumerate() {
+        let src = job.member_path(i);
+        if fs::symlink_metadata(&src).is_err() {
+            continue;
+        }
+        let mut why = Some("no free name".to_string());
+        for skip in 0..1000 {
+            let cand = fsops::free_name(
+                &layout.inbox,
+                &m.name,
+                &[],
+                when,
+                super::config::Collision::Timestamp,
+                skip,
+            );
+            match fsops::rename_noreplace(&src, &layout.inbox.join(&cand)) {
+                Ok(()) => {
+                    why = None;
+                    break;
+                }
+                Err(e) if e.kind() == io::ErrorKind::AlreadyExists => continue,
+                Err(e) => {
+                    why = Some(e.to_string());
+                    break;
+                }
+            }
+        }
+        if let Some(why) = why {
+            stuck.push(format!("{}: {why}", fsops::shown(m.name.as_ref())));
+        }
+    }
+    let _ = fsops::fsync_dir(&layout.inbox);
+    if stuck.is_empty() {
+        job.rec.set = None;
+        if let Err(e) = job.save() {
+            tracing::warn!(file = %job.shown(), "cannot record the set's put-back: {e}");
+        }
+    }
+    stuck
 }
 
 /// An entry of the put-back ledger.
@@ -720,6 +821,7 @@ pub fn claim(
             attempts: attempts + 1,
             stamp: Some(stamp),
             phase: Phase::Claimed,
+            set: None,
         },
         fresh: true,
         warned: None,
@@ -755,6 +857,16 @@ pub fn put_back(layout: &Layout, job: &Job, before_move: &dyn Fn()) -> io::Resul
     })?;
     let src = job.path();
     let stamp = Stamp::of(&fs::symlink_metadata(&src)?);
+    if job.rec.set.is_some() {
+        let mut j = job.clone();
+        let stuck = put_back_members(layout, &mut j);
+        if !stuck.is_empty() {
+            return Err(io::Error::other(format!(
+                "members of its set could not be put back: {}",
+                stuck.join("; ")
+            )));
+        }
+    }
     let ledger = ledger_put(
         layout,
         &stamp,
@@ -853,7 +965,14 @@ pub fn jobs_of(home: &Arc<Home>, id: &Identity) -> Vec<Job> {
         if b.starts_with(b".") || b.ends_with(b".json") || b.ends_with(b".tmp") {
             continue;
         }
-        if n.to_str().is_some_and(|s| ids.contains(s)) {
+        // a job's file, or a member of a job's set (`ID.mN`)
+        let of_a_job = n.to_str().is_some_and(|s| {
+            ids.contains(s)
+                || s.rsplit_once(".m").is_some_and(|(id, k)| {
+                    ids.contains(id) && !k.is_empty() && k.bytes().all(|b| b.is_ascii_digit())
+                })
+        });
+        if of_a_job {
             continue;
         }
         let path = home.dir.join(n);
@@ -887,6 +1006,7 @@ pub fn jobs_of(home: &Arc<Home>, id: &Identity) -> Vec<Job> {
                 attempts,
                 stamp: None,
                 phase: Phase::Claimed,
+                set: None,
             },
             fresh: false,
             warned: None,

@@ -63,6 +63,7 @@ pub struct FileConfig {
     pub grace_secs: Option<u64>,
     pub retry_max_secs: Option<u64>,
     pub max_wait_secs: Option<u64>,
+    pub set_wait_secs: Option<u64>,
     pub on_success: Option<OnSuccess>,
     pub collision: Option<Collision>,
     pub log_format: Option<LogFormat>,
@@ -125,6 +126,9 @@ pub struct Settings {
     pub retry_max: Duration,
     /// A file held open by a writer, or empty, waits at most this long unchanged.
     pub max_wait: Duration,
+    /// A set (an OBJ with its MTL and images) whose member is still missing this long
+    /// after the mesh was taken or the last member came goes to failed.
+    pub set_wait: Duration,
     pub on_success: OnSuccess,
     pub collision: Collision,
     pub log_format: LogFormat,
@@ -239,6 +243,7 @@ impl Settings {
                     .unwrap_or(3600)
                     .max(1),
             ),
+            set_wait: Duration::from_secs(args.set_wait_secs.or(file.set_wait_secs).unwrap_or(120)),
             on_success: args
                 .on_success
                 .or(file.on_success)
@@ -418,6 +423,7 @@ mod tests {
             "grace_secs",
             "retry_max_secs",
             "max_wait_secs",
+            "set_wait_secs",
             "on_success",
             "collision",
             "log_format",

@@ -22,6 +22,9 @@ pub const POINTS: &[&str] = &[
     "committing",
     // the model is in the outbox, its log is not
     "model-published",
+    // the other files of its set are in the outbox too (copies), the originals not
+    // yet archived
+    "members-published",
     // the original is in the archive (across file systems: the copy is linked there
     // and the original not yet removed from the processing folder)
     "archive-linked",

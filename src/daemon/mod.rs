@@ -33,6 +33,7 @@ pub mod fsops;
 pub mod hooks;
 pub mod index;
 mod queue;
+mod sets;
 mod sniff;
 mod watch;
 mod worker;
@@ -44,8 +45,9 @@ use config::{Collision, LogFormat, OnSuccess, Settings};
 use fsops::shown;
 use holefill::policy::Policy;
 use hooks::Hooks;
-use queue::{Pending, Seen};
+use queue::{MemberState, Pending, Seen};
 use sd_notify::NotifyState;
+use sets::{Member, Missing, Refused, Role, SetRec};
 use std::collections::{HashMap, VecDeque};
 use std::ffi::{OsStr, OsString};
 use std::path::{Path, PathBuf};
@@ -121,6 +123,10 @@ pub struct WatchArgs {
     /// long without a change [default: 3600].
     #[arg(long)]
     pub max_wait_secs: Option<u64>,
+    /// A set (an OBJ with its material library and images) waits this long for a
+    /// missing member, then goes to failed [default: 120].
+    #[arg(long)]
+    pub set_wait_secs: Option<u64>,
     /// What becomes of a repaired original [default: archive].
     #[arg(long, value_enum)]
     pub on_success: Option<OnSuccess>,
@@ -167,6 +173,31 @@ pub fn run(args: WatchArgs) -> Result<()> {
         tracing::error!("{e:#}");
     }
     r
+}
+
+/// A claimed mesh waiting for the other files of its set (see [`sets`]).
+struct Parked {
+    job: Job,
+    /// Its references as written (`mtllib` arguments, PLY `TextureFile` names).
+    refs: Vec<String>,
+    /// Since when no member became complete (the set's timeout counts from here).
+    since: Instant,
+    /// Members complete at the last look.
+    ready: usize,
+    /// MTL files read: name -> (stamp, image names).
+    libs: HashMap<String, (fsops::Stamp, Vec<String>)>,
+    /// What the journal last said about it.
+    said: String,
+}
+
+/// What a waiting set's files say now.
+enum Assembly {
+    /// Every member is complete (or not followed).
+    Complete(SetRec),
+    /// Some member is missing or not complete yet.
+    Wait(String),
+    /// A member has been missing for `set_wait_secs`: the set fails with what is there.
+    TimedOut(SetRec),
 }
 
 fn init_tracing(format: LogFormat) {
@@ -249,6 +280,8 @@ struct Daemon {
     pending: Pending,
     /// Jobs waiting to run (again), with their time.
     again: VecDeque<(Job, Instant)>,
+    /// Claimed meshes waiting for the other files of their sets.
+    sets: Vec<Parked>,
     /// Running jobs: id -> (home tag, shown name).
     working: HashMap<String, (String, String)>,
     /// Retryable failures per inbox name (for the back-off).
@@ -367,6 +400,7 @@ impl Daemon {
             generation: 0,
             policy_text,
             again: VecDeque::new(),
+            sets: Vec::new(),
             working: HashMap::new(),
             retries: HashMap::new(),
             expect: HashMap::new(),
@@ -417,7 +451,7 @@ impl Daemon {
     fn status(&self) -> String {
         format!(
             "waiting {}, working {}, repaired {}, failed {}",
-            self.pending.len() + self.again.len(),
+            self.pending.len() + self.again.len() + self.sets.len(),
             self.working.len(),
             self.repaired,
             self.failed
@@ -480,7 +514,7 @@ impl Daemon {
             }
             if let Some(m) = metrics::global() {
                 m.waiting
-                    .set((self.pending.len() + self.again.len()) as i64);
+                    .set((self.pending.len() + self.again.len() + self.sets.len()) as i64);
                 m.in_flight.set(self.working.len() as i64);
             }
             let status = self.status();
@@ -675,12 +709,17 @@ impl Daemon {
         let now = Instant::now();
         match std::fs::read_dir(&self.layout.inbox) {
             Ok(rd) => {
+                let mut listed = std::collections::HashSet::new();
                 for e in rd.flatten() {
                     let name = e.file_name();
-                    if claim::is_candidate_name(&name) && !e.file_type().is_ok_and(|t| t.is_dir()) {
+                    if claim::is_watched_name(&name) && !e.file_type().is_ok_and(|t| t.is_dir()) {
                         self.pending.note(&name, Seen::Scan, now);
+                        if !claim::is_candidate_name(&name) {
+                            listed.insert(name);
+                        }
                     }
                 }
+                self.pending.retain_members(&listed);
             }
             Err(e) => {
                 let msg = format!("cannot list the inbox {}: {e}", self.layout.inbox.display());
@@ -745,6 +784,7 @@ impl Daemon {
         let busy = |tag: &str, d: &Daemon| {
             d.working.values().any(|(t, _)| t == tag)
                 || d.again.iter().any(|(j, _)| j.home.tag == tag)
+                || d.sets.iter().any(|p| p.job.home.tag == tag)
         };
         let mut keep = Vec::new();
         for h in std::mem::take(&mut self.adopted) {
@@ -787,6 +827,175 @@ impl Daemon {
         }
     }
 
+    /// Looks at the waiting sets: claims the members of each complete set (or of one
+    /// that timed out) beside its mesh and starts it, while fewer than `workers`
+    /// repairs run.
+    fn advance_sets(&mut self) {
+        let now = Instant::now();
+        let mut keep = Vec::new();
+        for mut p in std::mem::take(&mut self.sets) {
+            if self.working.len() >= self.settings.workers {
+                keep.push(p);
+                continue;
+            }
+            let set = match self.assemble(&mut p, now) {
+                Assembly::Wait(what) => {
+                    if what != p.said {
+                        tracing::info!(file = %p.job.shown(), "{}: its set waits for {what}", p.job.shown());
+                        p.said = what;
+                    }
+                    keep.push(p);
+                    continue;
+                }
+                Assembly::TimedOut(set) => {
+                    tracing::warn!(file = %p.job.shown(), "{}: {} after set_wait_secs = {} s; the set goes to failed", p.job.shown(), set.missing_message(), self.settings.set_wait.as_secs());
+                    set
+                }
+                Assembly::Complete(set) => set,
+            };
+            let names: Vec<String> = set
+                .members
+                .iter()
+                .map(|m| shown(OsStr::new(&m.name)))
+                .collect();
+            match claim::claim_members(&self.layout, &mut p.job, set) {
+                Ok(true) => {
+                    tracing::info!(file = %p.job.shown(), "{}: its set is complete: {}", p.job.shown(), if names.is_empty() { "no other file".to_string() } else { names.join(", ") });
+                    self.spawn(p.job);
+                }
+                Ok(false) => {
+                    tracing::info!(file = %p.job.shown(), "{}: a file of its set changed or went while it was taken; it waits again", p.job.shown());
+                    keep.push(p);
+                }
+                Err(e) => {
+                    tracing::warn!(file = %p.job.shown(), "{}: cannot take the files of its set: {e}; later", p.job.shown());
+                    keep.push(p);
+                }
+            }
+        }
+        keep.append(&mut self.sets);
+        self.sets = keep;
+    }
+
+    /// Judges the files of a waiting set (see [`sets`]): references followed or not,
+    /// each member missing, not complete, or complete (an MTL read once complete, its
+    /// images added).
+    fn assemble(&mut self, p: &mut Parked, now: Instant) -> Assembly {
+        let inbox = self.layout.inbox.clone();
+        let (settle, max_wait) = (self.settings.settle, self.settings.max_wait);
+        let mesh = p.job.name_str().unwrap_or_default().to_string();
+        let is_obj = mesh.to_ascii_lowercase().ends_with(".obj");
+        let mut set = SetRec::default();
+        let mut not_yet: Vec<String> = Vec::new();
+        let mut wanted: Vec<(String, Role, String)> = Vec::new();
+        for r in &p.refs {
+            if is_obj {
+                // a whole name with spaces is looked for only when it is one to follow
+                let exists = |w: &str| {
+                    sets::member_name(w, &mesh).is_ok()
+                        && std::fs::symlink_metadata(inbox.join(w)).is_ok()
+                };
+                for n in sets::split_libs(r, exists) {
+                    wanted.push((n, Role::MaterialLibrary, mesh.clone()));
+                }
+            } else {
+                wanted.push((r.clone(), Role::Texture, mesh.clone()));
+            }
+        }
+        let mut k = 0;
+        while k < wanted.len() {
+            let (reference, role, by) = wanted[k].clone();
+            k += 1;
+            let name = match sets::member_name(&reference, &mesh) {
+                Ok(n) => n,
+                Err(why) => {
+                    set.refused.push(Refused { reference, by, why });
+                    continue;
+                }
+            };
+            if set.members.iter().any(|m| m.name == name)
+                || set.missing.iter().any(|m| m.name == name)
+                || not_yet.contains(&name)
+            {
+                continue;
+            }
+            let state = self
+                .pending
+                .member_state(&inbox, OsStr::new(&name), settle, max_wait, now);
+            match state {
+                MemberState::Missing => set.missing.push(Missing { name, role, by }),
+                MemberState::NotRegular => set.refused.push(Refused {
+                    reference,
+                    by,
+                    why: "not a regular file (a symbolic link, FIFO, ...): never followed".into(),
+                }),
+                MemberState::NotYet => not_yet.push(name),
+                MemberState::Ready(stamp) => {
+                    if role == Role::MaterialLibrary {
+                        let images = match p.libs.get(&name) {
+                            Some((st, imgs)) if *st == stamp => imgs.clone(),
+                            _ => match sets::read_mtl(&inbox.join(&name)) {
+                                Ok((imgs, st)) if st == stamp => {
+                                    p.libs.insert(name.clone(), (st, imgs.clone()));
+                                    imgs
+                                }
+                                // changed since it was judged: judged again
+                                Ok(_) => {
+                                    not_yet.push(name);
+                                    continue;
+                                }
+                                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                                    set.missing.push(Missing { name, role, by });
+                                    continue;
+                                }
+                                Err(e) => {
+                                    set.refused.push(Refused {
+                                        reference,
+                                        by,
+                                        why: format!("cannot be read: {e}"),
+                                    });
+                                    continue;
+                                }
+                            },
+                        };
+                        for img in images {
+                            wanted.push((img, Role::Texture, name.clone()));
+                        }
+                    }
+                    set.members.push(Member {
+                        name,
+                        role,
+                        by,
+                        stamp,
+                        copy: None,
+                        placed: None,
+                    });
+                }
+            }
+        }
+        if set.members.len() > p.ready {
+            p.ready = set.members.len();
+            p.since = now;
+        }
+        if !set.missing.is_empty() && now.duration_since(p.since) >= self.settings.set_wait {
+            return Assembly::TimedOut(set);
+        }
+        if !set.missing.is_empty() || !not_yet.is_empty() {
+            let mut what: Vec<String> = set
+                .missing
+                .iter()
+                .map(|m| format!("{} {} (missing)", m.role.what(), shown(OsStr::new(&m.name))))
+                .collect();
+            what.extend(
+                not_yet
+                    .iter()
+                    .map(|n| format!("{} (not complete yet)", shown(OsStr::new(n)))),
+            );
+            return Assembly::Wait(what.join(", "));
+        }
+        Assembly::Complete(set)
+    }
+
     /// Claims ready files while fewer than `workers` repairs run.
     fn dispatch(&mut self) {
         if self.working.len() >= self.settings.workers {
@@ -795,6 +1004,7 @@ impl Daemon {
         if !self.check_folders(false) {
             return;
         }
+        self.advance_sets();
         while self.working.len() < self.settings.workers {
             let now = Instant::now();
             if let Some(pos) = self.again.iter().position(|(_, t)| *t <= now) {
@@ -1005,6 +1215,22 @@ impl Daemon {
             Done::Gone { job, error } => {
                 tracing::error!(file = %job.shown(), "{}: {error}; nothing left to do for it", job.shown());
             }
+            Done::Members { job, refs } => {
+                let name = job.shown();
+                let named: Vec<String> = refs.iter().map(|r| shown(OsStr::new(r))).collect();
+                tracing::info!(file = %name, "{name}: a set (it names {}): waiting for its files", named.join(", "));
+                self.sets.push(Parked {
+                    job,
+                    refs,
+                    since: Instant::now(),
+                    ready: 0,
+                    libs: HashMap::new(),
+                    said: String::new(),
+                });
+                if self.stopping.is_some() {
+                    self.put_back_waiting();
+                }
+            }
         }
         self.release_adopted();
     }
@@ -1068,6 +1294,20 @@ impl Daemon {
                 }
                 None => {
                     tracing::warn!(file = %name, "{name}: left in {} for the next daemon to finish", job.home.dir.display())
+                }
+            }
+        }
+        for p in std::mem::take(&mut self.sets) {
+            let name = p.job.shown();
+            match worker::put_back_waiting(&self.ctx, &p.job) {
+                Some(Ok(n)) => {
+                    tracing::info!(file = %name, "{name}: put back into the inbox as {} (its set was not complete)", shown(&n))
+                }
+                Some(Err(e)) => {
+                    tracing::error!(file = %name, "{name}: cannot put back into the inbox: {e}; it stays in {}", p.job.home.dir.display())
+                }
+                None => {
+                    tracing::warn!(file = %name, "{name}: left in {} for the next daemon", p.job.home.dir.display())
                 }
             }
         }

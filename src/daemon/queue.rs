@@ -19,7 +19,7 @@
 //! Memory is bounded: at most `cap` names are remembered (later rescans find the
 //! rest), and the order list is compacted when names leave it.
 
-use super::claim::is_candidate_name;
+use super::claim::{is_candidate_name, is_watched_name};
 use super::fsops::Stamp;
 use std::collections::{HashMap, HashSet, VecDeque};
 use std::ffi::{OsStr, OsString};
@@ -54,6 +54,8 @@ pub enum Seen {
 
 #[derive(Clone, Debug)]
 struct Entry {
+    /// A mesh (taken on its own), not a file that may join a set.
+    mesh: bool,
     received: SystemTime,
     renamed_in: bool,
     /// Opens seen and not yet closed.
@@ -77,11 +79,35 @@ pub struct Ready {
     pub waited_out: bool,
 }
 
-/// The waiting files, oldest first, at most `cap` of them.
+/// How a file that may join a set is judged now.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MemberState {
+    /// Not in the inbox.
+    Missing,
+    /// There, but not a regular file (a symlink, FIFO, ...): never taken.
+    NotRegular,
+    /// There, not complete yet (held open, changing, empty).
+    NotYet,
+    /// Complete, as of this stamp.
+    Ready(Stamp),
+}
+
+/// What [`judge`] says of an entry.
+enum Judged {
+    Gone,
+    NotYet,
+    Ready { stamp: Stamp, waited_out: bool },
+}
+
+/// The waiting files, oldest first, at most `cap` of them: the meshes, and the other
+/// files that may join a set (judged by the same rules when a set asks for them, never
+/// taken on their own).
 #[derive(Debug)]
 pub struct Pending {
     order: VecDeque<OsString>,
     map: HashMap<OsString, Entry>,
+    /// How many entries of `map` are meshes.
+    meshes: usize,
     cap: usize,
     /// Names refused because the set was full (a rescan is due once there is room).
     pub overflowed: bool,
@@ -92,13 +118,30 @@ impl Pending {
         Pending {
             order: VecDeque::new(),
             map: HashMap::new(),
+            meshes: 0,
             cap,
             overflowed: false,
         }
     }
 
+    /// The meshes waiting.
     pub fn len(&self) -> usize {
-        self.map.len()
+        self.meshes
+    }
+
+    fn remove(&mut self, name: &OsStr) -> Option<Entry> {
+        let e = self.map.remove(name);
+        if e.as_ref().is_some_and(|e| e.mesh) {
+            self.meshes -= 1;
+        }
+        e
+    }
+
+    /// Forgets the files that may join a set and are not in `listed` (the inbox as
+    /// just listed): a member that left without an event.
+    pub fn retain_members(&mut self, listed: &HashSet<OsString>) {
+        self.map.retain(|n, e| e.mesh || listed.contains(n));
+        self.compact();
     }
 
     /// Length of the order list (for tests of its bound).
@@ -122,11 +165,11 @@ impl Pending {
 
     /// Records what was seen of `name` (ignored unless it is a mesh file name).
     pub fn note(&mut self, name: &OsStr, seen: Seen, now: Instant) {
-        if !is_candidate_name(name) {
+        if !is_watched_name(name) {
             return;
         }
         if seen == Seen::Removed {
-            self.map.remove(name);
+            self.remove(name);
             self.compact();
             return;
         }
@@ -137,9 +180,14 @@ impl Pending {
             }
             self.order.push_back(name.to_owned());
             self.compact();
+            let mesh = is_candidate_name(name);
+            if mesh {
+                self.meshes += 1;
+            }
             self.map.insert(
                 name.to_owned(),
                 Entry {
+                    mesh,
                     received: SystemTime::now(),
                     renamed_in: false,
                     opens: 0,
@@ -202,7 +250,7 @@ impl Pending {
         }
     }
 
-    /// The oldest waiting file that is ready, removed from the set; names that are no
+    /// The oldest waiting mesh that is ready, removed from the set; names that are no
     /// longer in the inbox are dropped on the way.
     pub fn take_ready(
         &mut self,
@@ -218,75 +266,127 @@ impl Pending {
                 self.order.remove(i);
                 continue;
             };
-            if e.not_before.is_some_and(|t| t > now) {
+            if !e.mesh {
                 i += 1;
                 continue;
             }
-            let quiet = e
-                .last_event
-                .map_or(Duration::MAX, |t| now.saturating_duration_since(t));
-            // cannot be ready yet whatever its stat says: spare the system call (a
-            // change is caught by the stat at the moment it could be taken)
-            if e.stat.is_some() {
-                let stable = now.saturating_duration_since(e.stable_since);
-                let too_soon = if e.opens > 0 {
-                    quiet.min(stable) < max_wait
-                } else {
-                    !e.renamed_in && (stable < settle || quiet < settle)
-                };
-                if too_soon {
-                    i += 1;
-                    continue;
-                }
-            }
-            let md = match fs::symlink_metadata(inbox.join(&name)) {
-                Ok(m) if !m.is_dir() => m,
-                _ => {
-                    // gone (taken by another daemon, removed), or a directory (never
-                    // taken)
-                    self.map.remove(&name);
+            match judge(e, &inbox.join(&name), settle, max_wait, now) {
+                Judged::Gone => {
+                    self.remove(&name);
                     self.order.remove(i);
-                    continue;
                 }
-            };
-            let st = Stamp::of(&md);
-            if e.stat != Some(st) {
-                let first = e.stat.is_none();
-                e.stat = Some(st);
-                e.stable_since = if first {
-                    // already unchanged for as long as its modification time says
-                    let mtime = md.modified().unwrap_or(SystemTime::UNIX_EPOCH);
-                    let age = SystemTime::now().duration_since(mtime).unwrap_or_default();
-                    now.checked_sub(age.min(max_wait.max(settle)))
-                        .unwrap_or(now)
-                } else {
-                    now
-                };
+                Judged::NotYet => i += 1,
+                Judged::Ready { stamp, waited_out } => {
+                    let received = e.received;
+                    self.remove(&name);
+                    self.order.remove(i);
+                    return Some(Ready {
+                        name,
+                        received,
+                        stamp,
+                        waited_out,
+                    });
+                }
             }
-            let stable = now.saturating_duration_since(e.stable_since);
-            let empty = md.is_file() && md.len() == 0;
-            let (ready, waited_out) = if e.opens > 0 || empty {
-                let r = quiet.min(stable) >= max_wait;
-                (r, r)
-            } else if e.renamed_in {
-                (true, false)
-            } else {
-                (stable >= settle && quiet >= settle, false)
-            };
-            if ready {
-                let received = e.received;
-                self.map.remove(&name);
-                self.order.remove(i);
-                return Some(Ready {
-                    name,
-                    received,
-                    stamp: st,
-                    waited_out,
-                });
-            }
-            i += 1;
         }
         None
+    }
+
+    /// How the file `name`, asked for by a set, is judged now (by the rules of a
+    /// mesh). A file not noted yet (its events lost, or older than the daemon) is
+    /// noted now and judged by its stat.
+    pub fn member_state(
+        &mut self,
+        inbox: &Path,
+        name: &OsStr,
+        settle: Duration,
+        max_wait: Duration,
+        now: Instant,
+    ) -> MemberState {
+        let path = inbox.join(name);
+        match fs::symlink_metadata(&path) {
+            Ok(m) if m.is_file() => {}
+            Ok(_) => return MemberState::NotRegular,
+            Err(_) => {
+                self.remove(name);
+                return MemberState::Missing;
+            }
+        }
+        if !self.map.contains_key(name) {
+            self.note(name, Seen::Scan, now);
+        }
+        let Some(e) = self.map.get_mut(name) else {
+            // the set of names is full: judged on its own
+            return MemberState::NotYet;
+        };
+        match judge(e, &path, settle, max_wait, now) {
+            Judged::Gone => {
+                self.remove(name);
+                MemberState::Missing
+            }
+            Judged::NotYet => MemberState::NotYet,
+            Judged::Ready { stamp, .. } => MemberState::Ready(stamp),
+        }
+    }
+}
+
+/// Judges one entry (see the module documentation): gone, not yet, or ready.
+fn judge(e: &mut Entry, path: &Path, settle: Duration, max_wait: Duration, now: Instant) -> Judged {
+    let quiet = e
+        .last_event
+        .map_or(Duration::MAX, |t| now.saturating_duration_since(t));
+    // cannot be ready yet whatever its stat says: spare the system call (a change is
+    // caught by the stat at the moment it could be taken)
+    if e.not_before.is_some_and(|t| t > now) {
+        return Judged::NotYet;
+    }
+    if e.stat.is_some() {
+        let stable = now.saturating_duration_since(e.stable_since);
+        let too_soon = if e.opens > 0 {
+            quiet.min(stable) < max_wait
+        } else {
+            !e.renamed_in && (stable < settle || quiet < settle)
+        };
+        if too_soon {
+            return Judged::NotYet;
+        }
+    }
+    let md = match fs::symlink_metadata(path) {
+        Ok(m) if !m.is_dir() => m,
+        // gone (taken by another daemon, removed), or a directory (never taken)
+        _ => return Judged::Gone,
+    };
+    let st = Stamp::of(&md);
+    if e.stat != Some(st) {
+        let first = e.stat.is_none();
+        e.stat = Some(st);
+        e.stable_since = if first {
+            // already unchanged for as long as its modification time says
+            let mtime = md.modified().unwrap_or(SystemTime::UNIX_EPOCH);
+            let age = SystemTime::now().duration_since(mtime).unwrap_or_default();
+            now.checked_sub(age.min(max_wait.max(settle)))
+                .unwrap_or(now)
+        } else {
+            now
+        };
+    }
+    let stable = now.saturating_duration_since(e.stable_since);
+    let empty = md.is_file() && md.len() == 0;
+    let (ready, waited_out) = if e.opens > 0 || empty {
+        let r = quiet.min(stable) >= max_wait;
+        (r, r)
+    } else if e.renamed_in {
+        (true, false)
+    } else {
+        (stable >= settle && quiet >= settle, false)
+    };
+    if ready {
+        Judged::Ready {
+            stamp: st,
+            waited_out,
+        }
+    } else {
+        Judged::NotYet
     }
 }
 
@@ -361,6 +461,56 @@ mod tests {
             take(&mut p, d.path(), settle, t + settle * 74).as_deref(),
             Some("e.obj")
         );
+    }
+
+    #[test]
+    fn members_are_judged_when_asked_never_taken_alone() {
+        let d = tempfile::tempdir().unwrap();
+        let settle = Duration::from_millis(100);
+        let mut p = Pending::new(10);
+        let t = Instant::now();
+        fs::write(d.path().join("s.mtl"), "newmtl a").unwrap();
+        fs::write(d.path().join("t.jpg"), "jpg").unwrap();
+        p.note(os("s.mtl"), Seen::RenamedIn, t);
+        p.note(os("t.jpg"), Seen::Created, t);
+        p.note(os("t.jpg"), Seen::Opened, t);
+        p.note(os(".x.jpg"), Seen::RenamedIn, t);
+        assert_eq!(p.len(), 0, "members are not meshes waiting");
+        assert!(take(&mut p, d.path(), settle, t + settle * 10).is_none());
+        let st = |p: &mut Pending, n: &str, at| p.member_state(d.path(), os(n), settle, LONG, at);
+        assert!(matches!(st(&mut p, "s.mtl", t), MemberState::Ready(_)));
+        assert_eq!(
+            st(&mut p, "t.jpg", t + settle * 10),
+            MemberState::NotYet,
+            "held open"
+        );
+        p.note(os("t.jpg"), Seen::ClosedWrite, t + settle * 10);
+        assert_eq!(
+            st(&mut p, "t.jpg", t + settle * 10 + settle / 2),
+            MemberState::NotYet,
+            "settling"
+        );
+        assert!(matches!(
+            st(&mut p, "t.jpg", t + settle * 13),
+            MemberState::Ready(_)
+        ));
+        assert_eq!(st(&mut p, "none.jpg", t), MemberState::Missing);
+        std::os::unix::fs::symlink("/etc/passwd", d.path().join("l.jpg")).unwrap();
+        assert_eq!(st(&mut p, "l.jpg", t), MemberState::NotRegular);
+        // a file never noted (its events lost) is judged by its stat
+        fs::write(d.path().join("u.png"), "png").unwrap();
+        let later = Instant::now() + settle * 50;
+        assert_eq!(
+            st(&mut p, "u.png", later),
+            MemberState::NotYet,
+            "just written"
+        );
+        assert!(matches!(
+            st(&mut p, "u.png", later + settle * 2),
+            MemberState::Ready(_)
+        ));
+        p.retain_members(&HashSet::new());
+        assert_eq!(p.map.len(), 0, "members not listed are forgotten");
     }
 
     #[test]

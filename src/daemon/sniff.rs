@@ -32,6 +32,56 @@ pub fn declared_faces(f: &File, name: &str) -> Option<u64> {
     }
 }
 
+/// The other files a mesh names, as written: an OBJ's `mtllib` arguments (the whole
+/// rest of each line, trimmed, its `#` comment removed; every line of the file is
+/// looked at, streaming, [`LINE_PREFIX`] bytes of each) and a PLY header's
+/// `comment TextureFile NAME` lines. Other formats name none. Reads from the start,
+/// through its own offset; `Err` when the file cannot be read.
+pub fn references(f: &File, name: &str) -> std::io::Result<Vec<String>> {
+    let lower = name.to_ascii_lowercase();
+    let obj = lower.ends_with(".obj");
+    if !obj && !lower.ends_with(".ply") {
+        return Ok(Vec::new());
+    }
+    let mut f = f.try_clone()?;
+    f.seek(SeekFrom::Start(0))?;
+    let mut out: Vec<String> = Vec::new();
+    let mut push = |s: &str| {
+        let s = s.trim();
+        if !s.is_empty() && !out.iter().any(|o| o == s) {
+            out.push(s.to_string());
+        }
+    };
+    let mut lines = 0usize;
+    for_each_line(BufReader::new(f), |line| {
+        lines += 1;
+        let s = String::from_utf8_lossy(line);
+        let t = s.trim_start();
+        if obj {
+            if let Some(rest) = t.strip_prefix("mtllib") {
+                if rest.starts_with(char::is_whitespace) {
+                    push(rest.split('#').next().unwrap_or(""));
+                }
+            }
+            return true;
+        }
+        // PLY: the header only
+        if lines > 10_000 || t.starts_with("end_header") {
+            return false;
+        }
+        let mut w = t.split_whitespace();
+        if let (Some("comment"), Some(k)) = (w.next(), w.next()) {
+            if k.eq_ignore_ascii_case("texturefile") {
+                if let Some(i) = t.find(k) {
+                    push(&t[i + k.len()..]);
+                }
+            }
+        }
+        true
+    });
+    Ok(out)
+}
+
 /// Calls `f` with the first [`LINE_PREFIX`] bytes of each line (without the newline)
 /// until it returns false or the input ends (or fails). Memory: one prefix.
 fn for_each_line<R: BufRead>(mut r: R, mut f: impl FnMut(&[u8]) -> bool) {
@@ -241,5 +291,27 @@ mod tests {
         let ascii = "solid x\nfacet normal 0 0 1\nouter loop\nendloop\nendfacet\nfacet normal 0 0 1\nendfacet\nendsolid\n";
         assert_eq!(stl(Cursor::new(ascii), ascii.len() as u64), Some(2));
         assert_eq!(stl(Cursor::new("garbage"), 7), None);
+    }
+
+    #[test]
+    fn references_of_obj_and_ply() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("a.obj");
+        std::fs::write(
+            &p,
+            "# mtllib not.mtl\nmtllib a.mtl # c\nv 0 0 0\n  mtllib  b c.mtl\nmtllibx y\nmtllib a.mtl\n",
+        )
+        .unwrap();
+        let f = File::open(&p).unwrap();
+        assert_eq!(references(&f, "a.obj").unwrap(), vec!["a.mtl", "b c.mtl"]);
+        let p = d.path().join("b.PLY");
+        std::fs::write(
+            &p,
+            "ply\nformat ascii 1.0\ncomment TextureFile tex 1.png\ncomment other\nelement vertex 0\nend_header\ncomment TextureFile late.png\n",
+        )
+        .unwrap();
+        let f = File::open(&p).unwrap();
+        assert_eq!(references(&f, "b.PLY").unwrap(), vec!["tex 1.png"]);
+        assert!(references(&f, "b.stl").unwrap().is_empty());
     }
 }

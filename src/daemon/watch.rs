@@ -8,7 +8,7 @@
 //! watched folder itself (removed, moved, unmounted) is reported so that the daemon
 //! recreates the inbox and watches it again.
 
-use super::claim::is_candidate_name;
+use super::claim::is_watched_name;
 use super::queue::Seen;
 use inotify::{EventMask, Inotify, WatchMask, Watches};
 use std::ffi::OsString;
@@ -116,7 +116,7 @@ fn map(m: EventMask, name: Option<&std::ffi::OsStr>) -> Option<Ev> {
         return Some(Ev::InboxGone);
     }
     let name = name?;
-    if m.contains(EventMask::ISDIR) || !is_candidate_name(name) {
+    if m.contains(EventMask::ISDIR) || !is_watched_name(name) {
         return None;
     }
     let seen = if m.contains(EventMask::MOVED_TO) {

@@ -40,6 +40,7 @@ use super::claim::{self, Job, Layout, Phase};
 use super::config::{Collision, OnSuccess, Settings};
 use super::fsops::{self, FileId, Stamp};
 use super::hooks::Hooks;
+use super::sets;
 use super::sniff;
 use serde_json::{json, Value};
 use std::ffi::OsString;
@@ -125,6 +126,9 @@ pub enum Done {
     /// Vanished from the processing folder (removed by someone with the daemon's
     /// rights, or with the whole inbox).
     Gone { job: Job, error: String },
+    /// The mesh names other files (`mtllib`, `TextureFile`): it waits, claimed, for the
+    /// members of its set (`refs`: the references as written).
+    Members { job: Job, refs: Vec<String> },
 }
 
 impl Done {
@@ -136,7 +140,8 @@ impl Done {
             | Done::Again { job, .. }
             | Done::Later { job, .. }
             | Done::PutBack { job, .. }
-            | Done::Gone { job, .. } => job,
+            | Done::Gone { job, .. }
+            | Done::Members { job, .. } => job,
         }
     }
 }
@@ -182,9 +187,16 @@ pub async fn process(ctx: Arc<RunCtx>, job: Job, mut cancel: watch::Receiver<boo
     let (end, stderr) = match &ctx.forward {
         // the gateway: repaired by a queue worker, its outcome written as the child's
         Some(f) => {
+            let members: Vec<(String, PathBuf)> = job
+                .members()
+                .iter()
+                .enumerate()
+                .map(|(i, m)| (m.name.clone(), job.member_path(i)))
+                .collect();
             f.repair(
                 &job.name.to_string_lossy(),
                 &file,
+                &members,
                 &out,
                 &child_log,
                 &mut cancel,
@@ -425,6 +437,9 @@ fn prepare(ctx: &RunCtx, mut job: Job, t: Times) -> Result<(Job, fs::File, Stamp
             ctx, job, t, "name", problem, None, None, true,
         )));
     }
+    if let Some(done) = check_set(ctx, &mut job, t, &file) {
+        return Err(Box::new(done));
+    }
     let s = &ctx.settings;
     if job.attempt > s.max_attempts {
         let started = job.attempt - 1;
@@ -483,6 +498,52 @@ fn prepare(ctx: &RunCtx, mut job: Job, t: Times) -> Result<(Job, fs::File, Stamp
         }
     }
     Ok((job, file, now))
+}
+
+/// The set of a claimed mesh (see [`super::sets`]): `Some` ends this attempt. A mesh
+/// whose references were not read yet and that names other files goes to wait for
+/// them ([`Done::Members`]); a set whose members are not all in the processing folder
+/// (a crash while they were claimed) puts them back and waits again; a set that timed
+/// out fails.
+fn check_set(ctx: &RunCtx, job: &mut Job, t: Times, file: &fs::File) -> Option<Done> {
+    let name = job.name_str().unwrap_or_default().to_string();
+    match &job.rec.set {
+        None => match sniff::references(file, &name) {
+            Ok(refs) if refs.is_empty() => None,
+            Ok(refs) => Some(Done::Members {
+                job: job.clone(),
+                refs,
+            }),
+            Err(e) => Some(Done::Later {
+                job: job.clone(),
+                error: format!("cannot read the files it names: {e}"),
+            }),
+        },
+        Some(set) => {
+            let complete = set.members.iter().enumerate().all(|(i, m)| {
+                fs::symlink_metadata(job.member_path(i))
+                    .is_ok_and(|md| md.is_file() && FileId::of(&md) == m.stamp.id)
+            });
+            if !complete {
+                let stuck = claim::put_back_members(&ctx.layout, job);
+                if !stuck.is_empty() {
+                    return Some(Done::Later {
+                        job: job.clone(),
+                        error: format!(
+                            "its set is incomplete and cannot be put back: {}",
+                            stuck.join("; ")
+                        ),
+                    });
+                }
+                return check_set(ctx, job, t, file);
+            }
+            if !set.missing.is_empty() {
+                let err = set.missing_message();
+                return Some(fail(ctx, job.clone(), t, "set", err, None, None, true));
+            }
+            None
+        }
+    }
 }
 
 /// A claimed entry that is not a regular file (symlink, FIFO, socket, device): never
@@ -612,17 +673,55 @@ fn commit(ctx: &RunCtx, mut job: Job, t: Times, model: &Path, child_log: &Path, 
             .unwrap_or(0)
     };
     let name = job.name_str().unwrap_or_default().to_string();
+    // a set: copies of its members for the outbox (the originals go to the archive)
+    for i in 0..job.members().len() {
+        let m = job.members()[i].clone();
+        let shown = fsops::shown(m.name.as_ref());
+        match sets::copy_member(&job.member_path(i), &job.tmp(&member_tmp(i)), m.stamp) {
+            Ok(Some(id)) => {
+                if let Some(set) = job.rec.set.as_mut() {
+                    set.members[i].copy = Some(id);
+                }
+            }
+            Ok(None) => {
+                let e = format!(
+                    "{shown} of its set changed while it was repaired; the set settles again"
+                );
+                return put_back(ctx, job, Some(e), true);
+            }
+            Err(e) => {
+                let e = format!("cannot copy {shown} of its set: {e}");
+                return put_back(ctx, job, Some(e), false);
+            }
+        }
+    }
+    let members: Vec<String> = job.members().iter().map(|m| m.name.clone()).collect();
     let when = SystemTime::now();
-    let output = fsops::free_name(
-        &l.outbox,
-        &name,
-        &[".repair.json", ".repair.png"],
-        when,
-        ctx.settings.collision,
-        0,
-    );
+    let output = if !members.is_empty() && ctx.settings.collision == Collision::Timestamp {
+        let names: Vec<&str> = members.iter().map(String::as_str).collect();
+        if sets::all_free(&l.outbox, &name, &[".repair.json", ".repair.png"], &names) {
+            name.clone()
+        } else {
+            match sets::new_folder(&l.outbox, &name, when) {
+                Ok(sub) => format!("{sub}/{name}"),
+                Err(e) => {
+                    let e = format!("cannot make a folder for its set in the outbox: {e}");
+                    return put_back(ctx, job, Some(e), false);
+                }
+            }
+        }
+    } else {
+        fsops::free_name(
+            &l.outbox,
+            &name,
+            &[".repair.json", ".repair.png"],
+            when,
+            ctx.settings.collision,
+            0,
+        )
+    };
     let archive = (ctx.settings.on_success == OnSuccess::Archive)
-        .then(|| fsops::free_name(&l.archive, &name, &[], when, Collision::Timestamp, 0));
+        .then(|| set_place(&l.archive, &name, &members, &[], when));
     job.rec.phase = Phase::Repaired {
         output,
         archive,
@@ -669,6 +768,11 @@ fn write_repaired_log(
     let archived = archive
         .as_ref()
         .map(|a| l.archive.join(a).display().to_string());
+    let set = set_info(
+        job,
+        Some(&place_dir(&l.outbox, output)),
+        archive.as_deref().map(|a| (l.archive.as_path(), a)),
+    );
     let base = report
         .cloned()
         .or_else(|| read_json(&job.tmp(".child.json")))
@@ -688,6 +792,7 @@ fn write_repaired_log(
                 "output": model_path.display().to_string(),
                 "original": if archive.is_some() { "archive" } else { "deleted" },
                 "archived_as": archived,
+                "set": set,
             }),
         ),
     );
@@ -703,6 +808,101 @@ fn write_repaired_log(
         *log = id;
     }
     Ok(())
+}
+
+/// The temporary name (in the job's temporary folder) of member `i`'s outbox copy.
+fn member_tmp(i: usize) -> String {
+    format!(".m{i}")
+}
+
+/// The job's temporary files (removed when it ends or goes back).
+fn tmp_files(job: &Job) -> Vec<String> {
+    let mut v = vec![
+        ".child.json".to_string(),
+        ".log.json".into(),
+        PICTURE.into(),
+        format!(".{}", ext_of(job)),
+    ];
+    v.extend((0..job.members().len()).map(member_tmp));
+    v
+}
+
+/// Where a set goes in the archive or failed folder `dir` (relative): the mesh's own
+/// name when neither it (with `suffixes`) nor a member's name is taken, else the mesh's
+/// name in a new subfolder (made when the first file moves there). A single file: the
+/// collision rule's name.
+fn set_place(
+    dir: &Path,
+    name: &str,
+    members: &[String],
+    suffixes: &[&str],
+    when: SystemTime,
+) -> String {
+    let names: Vec<&str> = members.iter().map(String::as_str).collect();
+    if members.is_empty() {
+        fsops::free_name(dir, name, suffixes, when, Collision::Timestamp, 0)
+    } else if sets::all_free(dir, name, suffixes, &names) {
+        name.to_string()
+    } else {
+        format!("{}/{name}", sets::free_folder(dir, name, when, 1))
+    }
+}
+
+/// Makes the subfolder of a relative place (`sub/name`) in `dir`, if it has one.
+fn ensure_place(dir: &Path, rel: &str) -> io::Result<()> {
+    match rel.rsplit_once('/') {
+        Some((sub, _)) => sets::ensure_folder(dir, sub),
+        None => Ok(()),
+    }
+}
+
+/// The folder a relative place's file is in (for its fsync).
+fn place_dir(dir: &Path, rel: &str) -> PathBuf {
+    match rel.rsplit_once('/') {
+        Some((sub, _)) => dir.join(sub),
+        None => dir.to_path_buf(),
+    }
+}
+
+/// The log's `daemon.set` object: the members, where each went, and the references
+/// not followed. `None` for a single file.
+fn set_info(job: &Job, out_dir: Option<&Path>, placed_in: Option<(&Path, &str)>) -> Option<Value> {
+    let set = job.rec.set.as_ref()?;
+    let members: Vec<Value> = set
+        .members
+        .iter()
+        .map(|m| {
+            let output = out_dir.map(|d| d.join(&m.name).display().to_string());
+            let placed = placed_in.map(|(dir, rel)| {
+                dir.join(
+                    m.placed
+                        .clone()
+                        .unwrap_or_else(|| sets::beside(rel, &m.name)),
+                )
+                .display()
+                .to_string()
+            });
+            json!({
+                "name": fsops::shown(m.name.as_ref()),
+                "role": m.role.what(),
+                "named_by": fsops::shown(m.by.as_ref()),
+                "bytes": m.stamp.size,
+                "output": output,
+                "original": placed,
+            })
+        })
+        .collect();
+    let refused: Vec<Value> = set
+        .refused
+        .iter()
+        .map(|r| json!({ "reference": fsops::shown(r.reference.as_ref()), "named_by": fsops::shown(r.by.as_ref()), "why": r.why }))
+        .collect();
+    let missing: Vec<Value> = set
+        .missing
+        .iter()
+        .map(|m| json!({ "name": fsops::shown(m.name.as_ref()), "role": m.role.what(), "named_by": fsops::shown(m.by.as_ref()) }))
+        .collect();
+    Some(json!({ "members": members, "not_followed": refused, "missing": missing }))
 }
 
 /// A step of the publish that cannot be done now.
@@ -740,24 +940,37 @@ fn resume_repaired(
         };
         let renamed = |job: &mut Job, skip_from: &str| -> io::Result<()> {
             // `output` (or its log) is someone else's: take the next free name
-            let mut skip = 1;
-            let new = loop {
-                let cand = fsops::free_name(
-                    &l.outbox,
-                    &name,
-                    &[".repair.json", ".repair.png"],
-                    SystemTime::now(),
-                    Collision::Timestamp,
-                    skip,
-                );
-                if cand != skip_from {
-                    break cand;
+            let new = if job.members().is_empty() {
+                let mut skip = 1;
+                loop {
+                    let cand = fsops::free_name(
+                        &l.outbox,
+                        &name,
+                        &[".repair.json", ".repair.png"],
+                        SystemTime::now(),
+                        Collision::Timestamp,
+                        skip,
+                    );
+                    if cand != skip_from {
+                        break cand;
+                    }
+                    skip += 1;
                 }
-                skip += 1;
+            } else {
+                // a set moves whole into a new folder: no name changes, so the model's
+                // and the MTL's references still find their files
+                let sub = sets::new_folder(&l.outbox, &name, SystemTime::now())?;
+                format!("{sub}/{name}")
             };
             let old_path = l.outbox.join(skip_from);
             if FileId::lstat(&old_path) == Some(model) {
                 fsops::rename_noreplace(&old_path, &l.outbox.join(&new))?;
+            }
+            for m in job.members() {
+                let old = l.outbox.join(sets::beside(skip_from, &m.name));
+                if m.copy.is_some() && FileId::lstat(&old) == m.copy {
+                    fsops::rename_noreplace(&old, &l.outbox.join(sets::beside(&new, &m.name)))?;
+                }
             }
             if let Phase::Repaired { output, .. } = &mut job.rec.phase {
                 *output = new;
@@ -777,12 +990,15 @@ fn resume_repaired(
                     }
                     continue;
                 }
+                if let Err(e) = ensure_place(&l.outbox, &output) {
+                    return later(job, format!("making the set's folder in the outbox: {e}"));
+                }
                 match fsops::publish(&tmp_model, &out_path, rule) {
                     Ok(()) => {}
                     Err(e) if e.kind() == io::ErrorKind::AlreadyExists => continue,
                     Err(e) => return later(job, format!("publishing the model: {e}")),
                 }
-                if let Err(e) = fsops::fsync_dir(&l.outbox) {
+                if let Err(e) = fsops::fsync_dir(&place_dir(&l.outbox, &output)) {
                     return later(job, format!("syncing the outbox: {e}"));
                 }
                 ctx.hooks.at("model-published", &job.name);
@@ -797,6 +1013,29 @@ fn resume_repaired(
                 );
             } else {
                 tracing::error!(file = %job.shown(), "the repaired model {} is gone from the outbox (taken before its log was written?)", out_path.display());
+            }
+        }
+
+        // 1b. the other files of its set, copies of the originals, byte for byte
+        match publish_members(ctx, &mut job, &output, rule) {
+            Step::Done => {}
+            Step::Again => continue,
+            Step::Rename => {
+                if let Err(e) = renamed(&mut job, &output) {
+                    return later(job, format!("choosing another folder for the set: {e}"));
+                }
+                continue;
+            }
+            Step::Later(e) => return later(job, e),
+        }
+
+        // 2a. the originals of the other files of its set, before the mesh's (whose
+        // absence from the processing folder says the step is over)
+        if fs::symlink_metadata(job.path()).is_ok() {
+            match archive_members(ctx, &mut job, t, report, archive.as_deref()) {
+                Step::Done => {}
+                Step::Again | Step::Rename => continue,
+                Step::Later(e) => return later(job, e),
             }
         }
 
@@ -816,14 +1055,20 @@ fn resume_repaired(
                                 return later(job, format!("removing the archived original from the processing folder: {e}"));
                             }
                         } else {
-                            let new = fsops::free_name(
-                                &l.archive,
-                                &name,
-                                &[],
-                                SystemTime::now(),
-                                Collision::Timestamp,
-                                1,
-                            );
+                            let new = if job.members().is_empty() {
+                                fsops::free_name(
+                                    &l.archive,
+                                    &name,
+                                    &[],
+                                    SystemTime::now(),
+                                    Collision::Timestamp,
+                                    1,
+                                )
+                            } else {
+                                let sub =
+                                    sets::free_folder(&l.archive, &name, SystemTime::now(), 1);
+                                format!("{sub}/{name}")
+                            };
                             if let Phase::Repaired { archive, .. } = &mut job.rec.phase {
                                 *archive = Some(new);
                             }
@@ -836,6 +1081,12 @@ fn resume_repaired(
                         }
                     } else {
                         ctx.hooks.at("move", &job.name);
+                        if let Err(e) = ensure_place(&l.archive, a) {
+                            return later(
+                                job,
+                                format!("making the set's folder in the archive: {e}"),
+                            );
+                        }
                         let copy = format!(".holefill-{}.copy", job.id);
                         let linked = || ctx.hooks.at("archive-linked", &job.name);
                         match fsops::move_file(&src, &l.archive, a.as_ref(), &copy, &linked) {
@@ -851,7 +1102,7 @@ fn resume_repaired(
                                 )
                             }
                         }
-                        if let Err(e) = fsops::fsync_dir(&l.archive) {
+                        if let Err(e) = fsops::fsync_dir(&place_dir(&l.archive, a)) {
                             return later(job, format!("syncing the archive: {e}"));
                         }
                     }
@@ -899,12 +1150,7 @@ fn resume_repaired(
             ctx.hooks.at("log-published", &job.name);
         }
         job.forget();
-        for s in [
-            ".child.json".to_string(),
-            ".log.json".into(),
-            PICTURE.into(),
-            format!(".{}", ext_of(&job)),
-        ] {
+        for s in tmp_files(&job) {
             let _ = fs::remove_file(job.tmp(&s));
         }
         return Done::Repaired {
@@ -921,6 +1167,177 @@ fn resume_repaired(
         job,
         "no free output or archive name after many tries".into(),
     )
+}
+
+/// How a step of a set's publish went.
+enum Step {
+    /// Done (or nothing to do).
+    Done,
+    /// Something changed (a record updated, a name taken meanwhile): the publish
+    /// starts over from its record.
+    Again,
+    /// A name in the outbox is someone else's: the set moves to a new folder.
+    Rename,
+    /// Cannot be done now.
+    Later(String),
+}
+
+/// Publishes the outbox copies of a set's members beside the model (`output`), each
+/// only if not there yet (the outbox name holds the copy's inode). A copy lost with
+/// the temporary folder is made again from the claimed member.
+fn publish_members(ctx: &RunCtx, job: &mut Job, output: &str, rule: Collision) -> Step {
+    let l = &ctx.layout;
+    let mut published = false;
+    for i in 0..job.members().len() {
+        let m = job.members()[i].clone();
+        let shown = fsops::shown(m.name.as_ref());
+        let dst = l.outbox.join(sets::beside(output, &m.name));
+        let there = FileId::lstat(&dst);
+        if m.copy.is_some() && there == m.copy {
+            continue;
+        }
+        let tmp = job.tmp(&member_tmp(i));
+        if m.copy.is_none() || FileId::lstat(&tmp) != m.copy {
+            let src = job.member_path(i);
+            if fs::symlink_metadata(&src).is_err() {
+                tracing::error!(file = %job.shown(), "{shown} of its set is neither in the outbox nor in the processing folder (removed by hand?)");
+                continue;
+            }
+            {
+                use std::os::unix::fs::DirBuilderExt;
+                let _ = fs::DirBuilder::new().mode(0o700).create(&job.home.tmp);
+            }
+            match sets::copy_member(&src, &tmp, m.stamp) {
+                Ok(Some(id)) => {
+                    if let Some(set) = job.rec.set.as_mut() {
+                        set.members[i].copy = Some(id);
+                    }
+                    if let Err(e) = job.save() {
+                        return Step::Later(format!("recording the copy of {shown}: {e}"));
+                    }
+                    return Step::Again;
+                }
+                Ok(None) => {
+                    return Step::Later(format!(
+                        "{shown} of its set is not the file claimed any more"
+                    ))
+                }
+                Err(e) => return Step::Later(format!("copying {shown} of its set: {e}")),
+            }
+        }
+        if there.is_some() && rule == Collision::Timestamp {
+            return Step::Rename;
+        }
+        match fsops::publish(&tmp, &dst, rule) {
+            Ok(()) => published = true,
+            Err(e) if e.kind() == io::ErrorKind::AlreadyExists => return Step::Again,
+            Err(e) => return Step::Later(format!("publishing {shown} of its set: {e}")),
+        }
+    }
+    if published {
+        if let Err(e) = fsops::fsync_dir(&place_dir(&l.outbox, output)) {
+            return Step::Later(format!("syncing the outbox: {e}"));
+        }
+        ctx.hooks.at("members-published", &job.name);
+    }
+    Step::Done
+}
+
+/// Moves the originals of a set's members beside the mesh's place `dest` in `dir`
+/// (the archive or the failed folder; `None`: deleted), each only if still in the
+/// processing folder. A name taken there by another file sends the set to a new
+/// folder (`Again`, after `moved_on` recorded it).
+fn place_members(
+    ctx: &RunCtx,
+    job: &mut Job,
+    dir: &Path,
+    dest: Option<&str>,
+    moved_on: &mut dyn FnMut(&mut Job, String) -> io::Result<()>,
+) -> Step {
+    let mut moved = false;
+    let name = job.name_str().unwrap_or_default().to_string();
+    for i in 0..job.members().len() {
+        let m = job.members()[i].clone();
+        let shown = fsops::shown(m.name.as_ref());
+        let src = job.member_path(i);
+        if fs::symlink_metadata(&src).is_err() {
+            continue;
+        }
+        let Some(dest) = dest else {
+            if let Err(e) = fs::remove_file(&src) {
+                return Step::Later(format!("deleting {shown} of its set: {e}"));
+            }
+            moved = true;
+            continue;
+        };
+        let rel = sets::beside(dest, &m.name);
+        let dst = dir.join(&rel);
+        if fs::symlink_metadata(&dst).is_ok() {
+            if FileId::lstat(&dst) == FileId::lstat(&src) || fsops::same_content(&src, &dst) {
+                if let Err(e) = fs::remove_file(&src) {
+                    return Step::Later(format!(
+                        "removing {shown} from the processing folder: {e}"
+                    ));
+                }
+                moved = true;
+                continue;
+            }
+            let sub = sets::free_folder(dir, &name, SystemTime::now(), 1);
+            if let Err(e) = moved_on(job, format!("{sub}/{name}")) {
+                return Step::Later(format!("recording another folder for the set: {e}"));
+            }
+            return Step::Again;
+        }
+        if let Err(e) = ensure_place(dir, dest) {
+            return Step::Later(format!("making the set's folder in {}: {e}", dir.display()));
+        }
+        ctx.hooks.at("move", &job.name);
+        let copy = format!(".holefill-{}.m{i}.copy", job.id);
+        match fsops::move_file(&src, &place_dir(dir, dest), m.name.as_ref(), &copy, &|| {}) {
+            Ok(()) => {}
+            Err(e) if e.kind() == io::ErrorKind::AlreadyExists => return Step::Again,
+            Err(e) => {
+                return Step::Later(format!(
+                    "moving {shown} of its set into {}: {e}",
+                    dir.display()
+                ))
+            }
+        }
+        moved = true;
+        if let Some(set) = job.rec.set.as_mut() {
+            set.members[i].placed = Some(rel);
+        }
+        if let Err(e) = job.save() {
+            tracing::warn!(file = %job.shown(), "cannot record where {shown} went: {e}");
+        }
+    }
+    if moved {
+        if let Some(d) = dest {
+            if let Err(e) = fsops::fsync_dir(&place_dir(dir, d)) {
+                return Step::Later(format!("syncing {}: {e}", dir.display()));
+            }
+        }
+        let _ = fsops::fsync_dir(&job.home.dir);
+    }
+    Step::Done
+}
+
+/// The archive step of a set's members (see [`place_members`]).
+fn archive_members(
+    ctx: &RunCtx,
+    job: &mut Job,
+    t: Times,
+    report: Option<&Value>,
+    archive: Option<&str>,
+) -> Step {
+    let dir = ctx.layout.archive.clone();
+    place_members(ctx, job, &dir, archive, &mut |job, new| {
+        if let Phase::Repaired { archive, .. } = &mut job.rec.phase {
+            *archive = Some(new);
+        }
+        write_repaired_log(ctx, job, t, report)?;
+        job.save()
+    })
 }
 
 /// The worker's picture of the repair, in the job's temporary folder.
@@ -955,24 +1372,22 @@ fn fail(
     exit: Option<i32>,
     kept: bool,
 ) -> Done {
-    for s in [
-        ".child.json".to_string(),
-        PICTURE.into(),
-        format!(".{}", ext_of(&job)),
-    ] {
-        let _ = fs::remove_file(job.tmp(&s));
+    for s in tmp_files(&job) {
+        if s != ".log.json" {
+            let _ = fs::remove_file(job.tmp(&s));
+        }
     }
     let name = match job.name_str() {
         Some(n) => n.to_string(),
         None => fsops::safe_name(&job.name),
     };
-    let dest = fsops::free_name(
+    let members: Vec<String> = job.members().iter().map(|m| m.name.clone()).collect();
+    let dest = set_place(
         &ctx.layout.failed,
         &name,
+        &members,
         &[".repair.json"],
         SystemTime::now(),
-        Collision::Timestamp,
-        0,
     );
     job.rec.phase = Phase::Failed {
         dest,
@@ -1004,6 +1419,20 @@ fn finish_failed(ctx: &RunCtx, mut job: Job, t: Times, report: Option<Value>) ->
         };
         let src = job.path();
         let dst = l.failed.join(&dest);
+        if fs::symlink_metadata(&src).is_ok() && !job.members().is_empty() {
+            let failed_dir = l.failed.clone();
+            let step = place_members(ctx, &mut job, &failed_dir, Some(&dest), &mut |job, new| {
+                if let Phase::Failed { dest, .. } = &mut job.rec.phase {
+                    *dest = new;
+                }
+                job.save()
+            });
+            match step {
+                Step::Done => {}
+                Step::Again | Step::Rename => continue,
+                Step::Later(e) => return later(job, format!("{stage}: {error}; then {e}")),
+            }
+        }
         if fs::symlink_metadata(&src).is_ok() {
             if kept {
                 if fs::symlink_metadata(&dst).is_ok() {
@@ -1028,6 +1457,9 @@ fn finish_failed(ctx: &RunCtx, mut job: Job, t: Times, report: Option<Value>) ->
                     }
                 } else {
                     ctx.hooks.at("move", &job.name);
+                    if let Err(e) = ensure_place(&l.failed, &dest) {
+                        return later(job, format!("{stage}: {error}; then making its folder in the failed folder: {e}"));
+                    }
                     let copy = format!(".holefill-{}.copy", job.id);
                     match fsops::move_file(&src, &l.failed, dest.as_ref(), &copy, &|| {}) {
                         Ok(()) => {}
@@ -1055,7 +1487,7 @@ fn finish_failed(ctx: &RunCtx, mut job: Job, t: Times, report: Option<Value>) ->
                             )
                         }
                     }
-                    let _ = fsops::fsync_dir(&l.failed);
+                    let _ = fsops::fsync_dir(&place_dir(&l.failed, &dest));
                 }
             } else if let Err(e) = fs::remove_file(&src) {
                 return later(job, format!("removing it: {e}"));
@@ -1079,6 +1511,7 @@ fn finish_failed(ctx: &RunCtx, mut job: Job, t: Times, report: Option<Value>) ->
                 _ => base["input"] = json!({ "path": input }),
             }
             let original = kept.then(|| dst.display().to_string());
+            let set = set_info(&job, None, Some((l.failed.as_path(), dest.as_str())));
             let log = final_log(
                 base,
                 "failed",
@@ -1089,7 +1522,7 @@ fn finish_failed(ctx: &RunCtx, mut job: Job, t: Times, report: Option<Value>) ->
                     &job,
                     t,
                     "failed",
-                    json!({ "worker_exit": exit, "output": null, "original": original }),
+                    json!({ "worker_exit": exit, "output": null, "original": original, "set": set }),
                 ),
             );
             let text = serde_json::to_string_pretty(&log).unwrap_or_default();
@@ -1107,7 +1540,7 @@ fn finish_failed(ctx: &RunCtx, mut job: Job, t: Times, report: Option<Value>) ->
                     format!("writing the failure log {}: {e}", log_path.display()),
                 );
             }
-            let _ = fsops::fsync_dir(&l.failed);
+            let _ = fsops::fsync_dir(&place_dir(&l.failed, &dest));
         }
         job.forget();
         return Done::Failed {
@@ -1125,12 +1558,7 @@ fn finish_failed(ctx: &RunCtx, mut job: Job, t: Times, report: Option<Value>) ->
 
 /// Puts the file back into the inbox (retry later, or settle again when `changed`).
 fn put_back(ctx: &RunCtx, job: Job, error: Option<String>, changed: bool) -> Done {
-    for s in [
-        ".child.json".to_string(),
-        ".log.json".into(),
-        PICTURE.into(),
-        format!(".{}", ext_of(&job)),
-    ] {
+    for s in tmp_files(&job) {
         let _ = fs::remove_file(job.tmp(&s));
     }
     match claim::put_back(&ctx.layout, &job, &|| ctx.hooks.at("move", &job.name)) {

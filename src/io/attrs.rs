@@ -585,27 +585,76 @@ pub fn referenced_files(raw: &RawMesh, input: &Path) -> Vec<PathBuf> {
     out
 }
 
-/// The image file names an MTL file's `map_*`, `bump`, `disp`, `decal`, `refl` and
-/// `norm` lines name (the last token: options such as `-s 1 1 1` come first).
+/// The image file names an MTL file's texture statements name (`map_Kd`, `map_Ka`,
+/// `map_Ks`, `map_Ns`, `map_d`, `map_Bump`, `bump`, `disp`, `decal`, `refl`, `norm`,
+/// `map_Pr`, ... : every `map_*` but the `map_aat on|off` switch), in order, each once.
+///
+/// Options come before the name (`-s 1 1 1`, `-o u v w`, `-mm base gain`, `-bm 0.5`,
+/// `-clamp on`, `-imfchan r`, `-type sphere`, ...): each is skipped with its arguments
+/// (`-o`, `-s`, `-t` take one to three numbers). The rest of the line, trimmed and
+/// without its `#` comment, is the name, so a name may hold spaces
+/// (`map_Kd -s 2 2 my scan.jpg` names `my scan.jpg`). An unknown option is taken to
+/// have one argument.
 pub fn mtl_images(mtl: &str) -> Vec<String> {
     let mut out: Vec<String> = Vec::new();
     for line in mtl.lines() {
         let line = line.split('#').next().unwrap_or("").trim();
-        let mut t = line.split_whitespace();
-        let Some(kw) = t.next() else { continue };
-        let kw = kw.to_ascii_lowercase();
-        if kw.starts_with("map_")
-            || matches!(kw.as_str(), "bump" | "disp" | "decal" | "refl" | "norm")
-        {
-            if let Some(name) = t.last() {
-                let name = name.to_string();
-                if !out.contains(&name) {
-                    out.push(name);
-                }
-            }
+        let Some(name) = mtl_texture_name(line) else {
+            continue;
+        };
+        if !out.iter().any(|n| *n == name) {
+            out.push(name);
         }
     }
     out
+}
+
+/// The file name of one MTL texture statement (see [`mtl_images`]); `None` for other
+/// statements or a statement without a name.
+fn mtl_texture_name(line: &str) -> Option<String> {
+    let (kw, mut rest) = split_word(line)?;
+    let kw = kw.to_ascii_lowercase();
+    let texture = (kw.starts_with("map_") && kw != "map_aat")
+        || matches!(kw.as_str(), "bump" | "disp" | "decal" | "refl" | "norm");
+    if !texture {
+        return None;
+    }
+    loop {
+        let (word, after) = split_word(rest)?;
+        if !word.starts_with('-')
+            || word.len() < 2
+            || word[1..].starts_with(|c: char| c.is_ascii_digit() || c == '.')
+        {
+            break;
+        }
+        let (min, max) = match word.to_ascii_lowercase().as_str() {
+            "-o" | "-s" | "-t" => (1, 3),
+            "-mm" => (2, 2),
+            _ => (1, 1),
+        };
+        rest = after;
+        for k in 0..max {
+            let Some((arg, after)) = split_word(rest) else {
+                return None;
+            };
+            if k >= min && arg.parse::<f64>().is_err() {
+                break;
+            }
+            rest = after;
+        }
+    }
+    let name = rest.trim();
+    (!name.is_empty()).then(|| name.to_string())
+}
+
+/// The first whitespace-separated word of `s` and the text after it.
+fn split_word(s: &str) -> Option<(&str, &str)> {
+    let s = s.trim_start();
+    if s.is_empty() {
+        return None;
+    }
+    let end = s.find(char::is_whitespace).unwrap_or(s.len());
+    Some((&s[..end], &s[end..]))
 }
 
 /// The repair log's `attributes` section.
@@ -675,8 +724,46 @@ mod tests {
     }
 
     #[test]
-    fn mtl_images_takes_the_last_token() {
+    fn mtl_images_skip_the_options() {
         let m = "newmtl a\nKd 1 1 1\nmap_Kd -s 1 1 1 tex.jpg\nbump n.png # c\nmap_Kd tex.jpg\n";
         assert_eq!(mtl_images(m), vec!["tex.jpg", "n.png"]);
+        let m = "\
+            newmtl b\n\
+            map_Ka -o 0.5 -s 2 2 -t 0 0 0 -clamp on amb.png\n\
+            map_Ks -mm 0 1 -imfchan r spec.tga\n\
+            map_Bump -bm 0.3 normal map.png\n\
+            MAP_D -blendu off -blendv on alpha.png\n\
+            disp -texres 512 d.exr\n\
+            norm ./n2.png\n\
+            refl -type sphere sky.hdr\n\
+            map_aat on\n\
+            map_Pr -s 1 rough.png\n\
+            map_Kd\n\
+            map_Kd -s 1 1 1\n\
+            Ns 10\n\
+            # map_Kd commented.png\n";
+        assert_eq!(
+            mtl_images(m),
+            vec![
+                "amb.png",
+                "spec.tga",
+                "normal map.png",
+                "alpha.png",
+                "d.exr",
+                "./n2.png",
+                "sky.hdr",
+                "rough.png"
+            ]
+        );
+        // CRLF line ends, tabs, and a name that looks like a number
+        assert_eq!(
+            mtl_images("map_Kd\t-s 1 1\t 1.jpg\r\nmap_Kd 2\r\n"),
+            vec!["1.jpg", "2"]
+        );
+        // hostile names are returned as written: the caller decides what to follow
+        assert_eq!(
+            mtl_images("map_Kd ../../etc/passwd\nmap_Kd /etc/shadow\n"),
+            vec!["../../etc/passwd", "/etc/shadow"]
+        );
     }
 }

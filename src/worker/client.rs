@@ -211,8 +211,11 @@ pub async fn results(
 }
 
 /// Writes a done scan's files into `dir` (each atomically, the log last) and returns
-/// the log's path. Names already taken by other content get `.DIGEST12` before the
-/// extension (all of the scan's files alike); the same content is not written twice.
+/// the log's path. The same content is not written twice. When a name is already
+/// taken by other content ([`result_names`]): a single file and its log get
+/// `.DIGEST12` before the extension; a set (an OBJ with its MTL and images) goes whole
+/// into the folder `dir/STEM.DIGEST12/` under its own names, so the OBJ's `mtllib` and
+/// the MTL's image names still find their files.
 pub async fn fetch_result(
     bucket: &async_nats::jetstream::object_store::ObjectStore,
     done: &DoneMsg,
@@ -226,7 +229,6 @@ pub async fn fetch_result(
         let object = format!("{}/{}", done.key, f);
         contents.push(get_bytes(bucket, &object, 16 << 30).await?);
     }
-    let short = &done.digest[..done.digest.len().min(12)];
     let taken_by_other =
         done.files
             .iter()
@@ -235,18 +237,43 @@ pub async fn fetch_result(
                 Ok(have) => &have != bytes,
                 Err(_) => false,
             });
+    let (dir, names) = result_names(dir, &done.scan, &done.digest, &done.files, taken_by_other);
+    std::fs::create_dir_all(&dir).with_context(|| format!("{}", dir.display()))?;
     let mut log_path = PathBuf::new();
-    for (f, bytes) in done.files.iter().zip(&contents) {
-        let name = if taken_by_other {
-            stamped(f, short)
-        } else {
-            f.clone()
-        };
-        let path = dir.join(&name);
+    for (name, bytes) in names.iter().zip(&contents) {
+        let path = dir.join(name);
         holefill::io::write_atomic(&path, bytes).map_err(|e| anyhow!("{}: {e}", path.display()))?;
         log_path = path;
     }
     Ok(log_path)
+}
+
+/// Where a done scan's `files` go in `dir` (the folder and each file's name there, in
+/// the order of `files`): their own names unless `taken_by_other`; then a set (more
+/// than the mesh and its log) keeps its names in `dir/STEM.DIGEST12/`, and a single
+/// file gets `.DIGEST12` before its extension (its log too).
+pub fn result_names(
+    dir: &Path,
+    scan: &str,
+    digest: &str,
+    files: &[String],
+    taken_by_other: bool,
+) -> (PathBuf, Vec<String>) {
+    let short = &digest[..digest.len().min(12)];
+    if !taken_by_other {
+        return (dir.to_path_buf(), files.to_vec());
+    }
+    if files.len() > 2 {
+        let stem = match scan.rsplit_once('.') {
+            Some((s, _)) if !s.is_empty() => s,
+            _ => scan,
+        };
+        return (dir.join(format!("{stem}.{short}")), files.to_vec());
+    }
+    (
+        dir.to_path_buf(),
+        files.iter().map(|f| stamped(f, short)).collect(),
+    )
 }
 
 /// `scan01.obj` -> `scan01.TAG.obj`; `scan01.obj.repair.json` -> `scan01.TAG.obj.repair.json`.
@@ -271,5 +298,34 @@ mod tests {
         assert_eq!(stamped("a.obj.repair.json", "abc"), "a.abc.obj.repair.json");
         assert_eq!(stamped("tex.png", "abc"), "tex.abc.png");
         assert_eq!(stamped("noext", "abc"), "noext.abc");
+    }
+
+    #[test]
+    fn a_taken_set_keeps_its_names_in_a_folder_of_its_own() {
+        let d = Path::new("/out");
+        let set: Vec<String> = ["s.obj", "s.mtl", "t.jpg", "s.obj.repair.json"]
+            .map(String::from)
+            .to_vec();
+        assert_eq!(
+            result_names(d, "s.obj", "0123456789abcdef", &set, false),
+            (d.to_path_buf(), set.clone())
+        );
+        let (dir, names) = result_names(d, "s.obj", "0123456789abcdef", &set, true);
+        assert_eq!(dir, d.join("s.0123456789ab"));
+        assert_eq!(
+            names, set,
+            "names unchanged: the OBJ's mtllib still finds s.mtl"
+        );
+        let single: Vec<String> = ["s.obj", "s.obj.repair.json"].map(String::from).to_vec();
+        assert_eq!(
+            result_names(d, "s.obj", "0123456789abcdef", &single, true),
+            (
+                d.to_path_buf(),
+                vec![
+                    "s.0123456789ab.obj".to_string(),
+                    "s.0123456789ab.obj.repair.json".into()
+                ]
+            )
+        );
     }
 }

@@ -86,28 +86,43 @@ impl Forwarder {
         Ok(f)
     }
 
-    /// Submits the file and waits for its outcome, which it writes as the child would:
-    /// the model into `out` and the worker's log into `log`. Returns how the remote
-    /// repair ended and a message for the daemon's log.
+    /// Submits the file, with the other files of its set (`members`: name and path in
+    /// the daemon's processing folder, read without following a link), as one scan and
+    /// waits for its outcome, which it writes as the child would: the model into `out`
+    /// and the worker's log into `log`. The members come back unchanged from the worker
+    /// (the daemon publishes its own copies). Returns how the remote repair ended and a
+    /// message for the daemon's log.
     pub async fn repair(
         &self,
         name: &str,
         input: &std::fs::File,
+        members: &[(String, std::path::PathBuf)],
         out: &Path,
         log: &Path,
         cancel: &mut watch::Receiver<bool>,
     ) -> (ChildEnd, Vec<u8>) {
-        let bytes = match read_all(input) {
-            Ok(b) => b,
+        let mut contents = Vec::with_capacity(1 + members.len());
+        match read_all(input) {
+            Ok(b) => contents.push(b),
             Err(e) => return (ChildEnd::SpawnError(e), Vec::new()),
-        };
-        let entry = super::scan::FileEntry {
-            name: name.to_string(),
-            size: bytes.len() as u64,
-            sha256: super::scan::sha256_hex(&bytes),
-        };
+        }
+        for (_, path) in members {
+            match crate::daemon::fsops::open_nofollow(path).and_then(|f| read_all(&f)) {
+                Ok(b) => contents.push(b),
+                Err(e) => return (ChildEnd::SpawnError(e), Vec::new()),
+            }
+        }
+        let names = std::iter::once(name).chain(members.iter().map(|(n, _)| n.as_str()));
+        let entries = names
+            .zip(&contents)
+            .map(|(n, bytes)| super::scan::FileEntry {
+                name: n.to_string(),
+                size: bytes.len() as u64,
+                sha256: super::scan::sha256_hex(bytes),
+            })
+            .collect();
         let now = crate::daemon::fsops::rfc3339(std::time::SystemTime::now());
-        let msg = match ScanMsg::new(vec![entry], now, Some(self.origin.clone())) {
+        let msg = match ScanMsg::new(entries, now, Some(self.origin.clone())) {
             Ok(m) => m,
             Err(e) => {
                 return (
@@ -125,7 +140,7 @@ impl Forwarder {
             w.insert(key.clone(), notify.clone());
         }
         let r = self
-            .submit_and_wait(&msg, &bytes, &notify, out, log, cancel)
+            .submit_and_wait(&msg, &contents, &notify, out, log, cancel)
             .await;
         if let Ok(mut w) = self.waiters.lock() {
             w.remove(&key);
@@ -136,7 +151,7 @@ impl Forwarder {
     async fn submit_and_wait(
         &self,
         msg: &ScanMsg,
-        bytes: &[u8],
+        contents: &[Vec<u8>],
         notify: &Notify,
         out: &Path,
         log: &Path,
@@ -151,13 +166,12 @@ impl Forwarder {
             match self.outcome(msg, out, log).await {
                 Ok(Some(end)) => return end,
                 Ok(None) if !submitted => {
-                    let contents = [bytes.to_vec()];
                     match super::client::submit(
                         &self.conn,
                         &self.names,
                         &self.buckets,
                         msg,
-                        &contents,
+                        contents,
                     )
                     .await
                     {
