@@ -8,24 +8,13 @@ use crate::io::RawMesh;
 use crate::mesh::Mesh;
 use crate::policy::{IslandMode, Policy};
 use crate::report::{HoleStatus, RepairReport};
-use crate::testutil::icosphere;
 use glam::DVec3;
 use proptest::prelude::*;
 use std::collections::HashMap;
 
 /// A unit icosphere (1,280 faces) with round holes around the given directions.
 fn holed_sphere(dirs: &[(DVec3, f64)]) -> RawMesh {
-    let mut raw = icosphere(3, 1.0);
-    let pos = raw.positions.clone();
-    raw.faces.retain(|f| {
-        let c = f
-            .iter()
-            .map(|&v| pos[v as usize])
-            .sum::<DVec3>()
-            .normalize();
-        dirs.iter().all(|(d, cap)| c.dot(d.normalize()) < cap.cos())
-    });
-    raw
+    crate::testutil::sphere_caps_removed(3, 1.0, dirs)
 }
 
 /// Checks what every repair must give: an oriented manifold output (each edge at most
