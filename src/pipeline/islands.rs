@@ -150,14 +150,26 @@ fn bridge(mesh: &mut Mesh, outer: &[VertexId], island: &[VertexId]) -> bool {
     let d = |a: VertexId, b: VertexId| (mesh.pos(a) - mesh.pos(b)).length();
     // faces (o_s, o_s+1, i_u) and (i_u, i_u+1, o_s): new edges o_s+1 - i_u,
     // i_u+1 - o_s and the diagonal o_s - i_u
-    let mut cands: Vec<(f64, usize, usize)> = Vec::with_capacity(m * k);
+    // the candidates: the best pair for each edge of either loop (m + k of them, not
+    // m k: a big hole around a big island stays small in memory), shortest first
+    let cost =
+        |s: usize, u: usize| d(outer[(s + 1) % m], island[u]) + d(outer[s], island[(u + 1) % k]);
+    let mut best_s: Vec<Option<(f64, usize, usize)>> = vec![None; m];
+    let mut best_u: Vec<Option<(f64, usize, usize)>> = vec![None; k];
     for s in 0..m {
         for u in 0..k {
-            let cost = d(outer[(s + 1) % m], island[u]) + d(outer[s], island[(u + 1) % k]);
-            cands.push((cost, s, u));
+            let c = cost(s, u);
+            if best_s[s].is_none_or(|b| c < b.0) {
+                best_s[s] = Some((c, s, u));
+            }
+            if best_u[u].is_none_or(|b| c < b.0) {
+                best_u[u] = Some((c, s, u));
+            }
         }
     }
-    cands.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    let mut cands: Vec<(f64, usize, usize)> = best_s.into_iter().chain(best_u).flatten().collect();
+    cands.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then((a.1, a.2).cmp(&(b.1, b.2))));
+    cands.dedup_by_key(|c| (c.1, c.2));
     let crosses = |a: DVec2, b: DVec2| {
         let edges = (0..m)
             .map(|x| (o[x], o[(x + 1) % m]))
