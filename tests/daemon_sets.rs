@@ -415,3 +415,36 @@ fn a_kill_while_a_set_is_published_leaves_one_copy_of_each_file() {
             .is_empty()));
     }
 }
+
+#[test]
+fn a_mesh_waiting_for_its_set_goes_back_to_the_inbox_on_sigterm() {
+    let f = Folders::new();
+    let mut d = Daemon::ready(&f, &["--set-wait-secs", "60"], &[]);
+    let obj = textured_obj("w.mtl");
+    drop_renamed(&f.inbox, "w.obj", &obj);
+    assert!(d.wait_log("w.obj: its set waits for", 1), "{}", d.log());
+    assert!(
+        Folders::files(&f.inbox).is_empty(),
+        "claimed while it waits"
+    );
+    d.signal("TERM");
+    let st = d.wait_exit(Duration::from_secs(20)).expect("stops");
+    assert!(st.success(), "{st:?}\n{}", d.log());
+    assert_eq!(Folders::files(&f.inbox), vec!["w.obj"]);
+    assert_eq!(fs::read_to_string(f.inbox.join("w.obj")).unwrap(), obj);
+    assert!(f.processing().is_empty());
+    // the next daemon takes it again and completes the set once it is there
+    let d2 = Daemon::ready(&f, &["--set-wait-secs", "60"], &[]);
+    let jpg = jpg_bytes(5);
+    drop_bytes(&f.inbox, "w.jpg", &jpg);
+    drop_renamed(&f.inbox, "w.mtl", &mtl_text("w.jpg"));
+    assert!(
+        wait_until(Duration::from_secs(30), || f
+            .outbox
+            .join("w.obj.repair.json")
+            .exists()),
+        "{}",
+        d2.log()
+    );
+    assert_whole(&f.outbox, "w", &mtl_text("w.jpg"), &jpg);
+}

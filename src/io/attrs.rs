@@ -602,7 +602,7 @@ pub fn mtl_images(mtl: &str) -> Vec<String> {
         let Some(name) = mtl_texture_name(line) else {
             continue;
         };
-        if !out.iter().any(|n| *n == name) {
+        if !out.contains(&name) {
             out.push(name);
         }
     }
@@ -634,9 +634,7 @@ fn mtl_texture_name(line: &str) -> Option<String> {
         };
         rest = after;
         for k in 0..max {
-            let Some((arg, after)) = split_word(rest) else {
-                return None;
-            };
+            let (arg, after) = split_word(rest)?;
             if k >= min && arg.parse::<f64>().is_err() {
                 break;
             }

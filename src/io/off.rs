@@ -414,10 +414,10 @@ pub(crate) fn write<W: Write>(w: &mut W, raw: &RawMesh) -> std::io::Result<()> {
         w.write_all(b" ")?;
         super::write_real(w, p.z, f32)?;
         for v in normals.iter().flatten() {
-            val(w, *v, i)?;
+            val(w, v, i)?;
         }
         for v in &color_props {
-            val(w, *v, i)?;
+            val(w, v, i)?;
         }
         if let Some(c) = colors.and_then(|c| c.get(i)) {
             write!(
@@ -429,7 +429,7 @@ pub(crate) fn write<W: Write>(w: &mut W, raw: &RawMesh) -> std::io::Result<()> {
             )?;
         }
         for v in st.iter().flatten() {
-            val(w, *v, i)?;
+            val(w, v, i)?;
         }
         w.write_all(b"\n")?;
     }
