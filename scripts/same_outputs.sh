@@ -3,8 +3,8 @@
 # every mesh of the shared bench with the bench's own synthetic holes for hole seeds
 # 1-3, and on the natural scans (their own holes), and compares byte for byte: the
 # repaired mesh, the repair log (JSON) with its timing fields removed ("ms", "read_ms",
-# "smooth_ms", "fill_ms", "write_ms"), the printed summary with its times removed, and
-# the exit status. Every policy sets limits.hole_time_ms = 0 (no time limit), so that
+# "smooth_ms", "fill_ms", "write_ms", "attributes_ms", "picture_ms"), the printed
+# summary with its times removed, and the exit status. Every policy sets limits.hole_time_ms = 0 (no time limit), so that
 # no result depends on how loaded the machine is.
 #
 #   scripts/same_outputs.sh OLD_BIN NEW_BIN [OUT_DIR]
@@ -131,7 +131,7 @@ compare_one() {
     echo "$rc" > "$d/rc"
     # timings aside
     if [ -f "$d/log.json" ]; then
-      sed -E '/^\s*"(ms|read_ms|smooth_ms|fill_ms|write_ms)":/d' "$d/log.json" > "$d/log.cmp"
+      sed -E '/^\s*"(ms|read_ms|smooth_ms|fill_ms|write_ms|attributes_ms|picture_ms)":/d' "$d/log.json" > "$d/log.cmp"
     fi
     sed -E 's/ +[0-9.]+ ms//; /^FILL_TIME_S=/d' "$d/stdout.txt" > "$d/stdout.cmp"
   done

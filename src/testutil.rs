@@ -235,8 +235,13 @@ pub fn icosphere(level: usize, r: f64) -> RawMesh {
 /// An icosphere of radius `r` (`level` subdivisions) without the faces whose centroid
 /// direction lies within `cap` radians of `dir`: a sphere with one round hole.
 pub fn sphere_cap_removed(level: usize, r: f64, dir: DVec3, cap: f64) -> RawMesh {
+    sphere_caps_removed(level, r, &[(dir, cap)])
+}
+
+/// An icosphere of radius `r` without the faces whose centroid direction lies within
+/// `cap` radians of one of the directions `dir`: a sphere with round holes.
+pub fn sphere_caps_removed(level: usize, r: f64, caps: &[(DVec3, f64)]) -> RawMesh {
     let mut raw = icosphere(level, r);
-    let dir = dir.normalize();
     let pos = &raw.positions;
     raw.faces.retain(|f| {
         let c = f
@@ -244,7 +249,7 @@ pub fn sphere_cap_removed(level: usize, r: f64, dir: DVec3, cap: f64) -> RawMesh
             .map(|&v| pos[v as usize])
             .sum::<DVec3>()
             .normalize();
-        c.dot(dir) < cap.cos()
+        caps.iter().all(|(d, cap)| c.dot(d.normalize()) < cap.cos())
     });
     raw
 }

@@ -8,24 +8,13 @@ use crate::io::RawMesh;
 use crate::mesh::Mesh;
 use crate::policy::{IslandMode, Policy};
 use crate::report::{HoleStatus, RepairReport};
-use crate::testutil::icosphere;
 use glam::DVec3;
 use proptest::prelude::*;
 use std::collections::HashMap;
 
 /// A unit icosphere (1,280 faces) with round holes around the given directions.
 fn holed_sphere(dirs: &[(DVec3, f64)]) -> RawMesh {
-    let mut raw = icosphere(3, 1.0);
-    let pos = raw.positions.clone();
-    raw.faces.retain(|f| {
-        let c = f
-            .iter()
-            .map(|&v| pos[v as usize])
-            .sum::<DVec3>()
-            .normalize();
-        dirs.iter().all(|(d, cap)| c.dot(d.normalize()) < cap.cos())
-    });
-    raw
+    crate::testutil::sphere_caps_removed(3, 1.0, dirs)
 }
 
 /// Checks what every repair must give: an oriented manifold output (each edge at most
@@ -139,6 +128,9 @@ enum Defect {
     /// The first corner of face `i` replaced by a copy at the same position: a loop of
     /// zero area (two slits) around it.
     Slit(usize),
+    /// A flat fan of `k` faces (a piece of its own) inside the hole at the north pole:
+    /// an island.
+    Island(u32),
 }
 
 fn inject(raw: &mut RawMesh, d: &Defect) {
@@ -168,6 +160,19 @@ fn inject(raw: &mut RawMesh, d: &Defect) {
             raw.faces.push([v, k - 2, k - 1]);
         }
         Defect::Unreferenced => raw.positions.push(DVec3::new(3.0, 3.0, 3.0)),
+        Defect::Island(k) => {
+            let c = DVec3::new(0.0, 0.0, 0.995);
+            let b = raw.positions.len() as u32;
+            raw.positions.push(c);
+            for j in 0..k {
+                let a = std::f64::consts::TAU * f64::from(j) / f64::from(k);
+                raw.positions
+                    .push(c + DVec3::new(0.08 * a.cos(), 0.08 * a.sin(), 0.0));
+            }
+            for j in 0..k {
+                raw.faces.push([b, b + 1 + j, b + 1 + (j + 1) % k]);
+            }
+        }
         Defect::Crack(i) | Defect::Slit(i) => {
             let corners = if matches!(d, Defect::Crack(_)) { 3 } else { 1 };
             for c in 0..corners {
@@ -200,12 +205,21 @@ fn each_defect_alone_is_repaired() {
         Defect::Flap(400, 1),
         Defect::Pinch(500),
         Defect::Unreferenced,
+        // removed (4 faces < islands.remove_below_faces), bridged (12 faces)
+        Defect::Island(4),
+        Defect::Island(12),
     ] {
         let mut raw = three_holes();
         inject(&mut raw, &d);
         let (out, rep) = repair(&raw, &Policy::default()).unwrap_or_else(|e| panic!("{d:?}: {e}"));
         assert_sound(&raw, &out, &rep);
         assert_eq!(rep.summary.failed, 0, "{d:?}: {:#?}", rep.holes);
+        if let Defect::Island(k) = d {
+            let removed: usize = rep.holes.iter().map(|h| h.island_faces_removed).sum();
+            let bridged: usize = rep.holes.iter().map(|h| h.islands_bridged).sum();
+            assert_eq!((removed, bridged), if k < 10 { (4, 0) } else { (0, 1) });
+            assert_eq!(rep.summary.filled, 3, "{:#?}", rep.holes);
+        }
     }
 }
 

@@ -4,17 +4,12 @@
 
 use super::*;
 
-/// A vertex occurrence on a front (a vertex shared by two fronts after a merge has
-/// one node in each).
-#[derive(Clone, Debug)]
-pub(super) struct Node {
-    /// Patch vertex index.
-    pub(super) v: u32,
-    pub(super) prev: u32,
-    pub(super) next: u32,
-    pub(super) front: u32,
-    pub(super) alive: bool,
-    pub(super) version: u32,
+/// What an advancing-front node ([`Node`](crate::fill::kit::front::Node): a vertex occurrence on a front; a
+/// vertex shared by two fronts after a merge has one node in each) carries besides
+/// its place on the ring.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct NodeData {
+    /// Set aside: no valid step at it since it last changed.
     pub(super) blocked: bool,
     /// Unit normal of the triangle behind the front edge `self -> next`.
     pub(super) behind: DVec3,
@@ -65,9 +60,8 @@ pub(super) struct Builder<'a> {
     pub(super) tris: Vec<[u32; 3]>,
     pub(super) edges: FxSet<(u32, u32)>,
     pub(super) forbidden: FxSet<(u32, u32)>,
-    pub(super) nodes: Vec<Node>,
-    pub(super) front_size: Vec<usize>,
-    pub(super) alive: usize,
+    /// The fronts (their nodes and sizes).
+    pub(super) ring: Ring<NodeData>,
     pub(super) heap: FrontQueue,
     pub(super) node_grid: Grid,
     pub(super) node_scratch: Vec<u32>,
@@ -139,7 +133,7 @@ impl<'a> Builder<'a> {
             edges.insert(edge_key(i as u32, ((i + 1) % k) as u32));
         }
         // the mesh face behind each loop edge i -> i+1 holds the half-edge i+1 -> i
-        let mut nodes = Vec::with_capacity(k * 4);
+        let mut ring = Ring::new(k);
         for i in 0..k {
             let a = hole[(i + 1) % k];
             let b = hole[i];
@@ -149,16 +143,17 @@ impl<'a> Builder<'a> {
                 .find(|&h| mesh.topo.to(h) == b)
                 .map(|h| mesh.face_normal_raw(h.face()).normalize_or_zero())
                 .unwrap_or(DVec3::ZERO);
-            nodes.push(Node {
-                v: i as u32,
-                prev: ((i + k - 1) % k) as u32,
-                next: ((i + 1) % k) as u32,
-                front: 0,
-                alive: true,
-                version: 0,
+            let data = NodeData {
                 blocked: false,
                 behind,
-            });
+            };
+            ring.push(
+                i as u32,
+                ((i + k - 1) % k) as u32,
+                ((i + 1) % k) as u32,
+                0,
+                data,
+            );
         }
         let cell = lmean;
         let mut node_grid = Grid::new(cell);
@@ -225,9 +220,7 @@ impl<'a> Builder<'a> {
             tris: Vec::new(),
             edges,
             forbidden,
-            nodes,
-            front_size: vec![k],
-            alive: k,
+            ring,
             heap: FrontQueue::new(),
             node_grid,
             node_scratch: Vec::new(),
@@ -256,7 +249,7 @@ impl<'a> Builder<'a> {
     }
 
     pub(super) fn npos(&self, node: u32) -> DVec3 {
-        self.pos[self.nodes[node as usize].v as usize]
+        self.pos[self.ring.nodes[node as usize].vert as usize]
     }
 
     pub(super) fn emit(&mut self, t: [u32; 3]) -> DVec3 {
@@ -274,80 +267,40 @@ impl<'a> Builder<'a> {
     }
 
     pub(super) fn new_node(&mut self, v: u32, front: u32, behind: DVec3) -> u32 {
-        let id = self.nodes.len() as u32;
-        self.nodes.push(Node {
-            v,
-            prev: id,
-            next: id,
-            front,
-            alive: true,
-            version: 0,
-            blocked: false,
-            behind,
-        });
+        let id = self.ring.nodes.len() as u32;
+        let blocked = false;
+        self.ring
+            .push(v, id, id, front, NodeData { blocked, behind });
         let q = self.pos[v as usize];
         self.node_grid.insert(id, q, q);
-        self.alive += 1;
         id
-    }
-
-    pub(super) fn link(&mut self, a: u32, b: u32) {
-        self.nodes[a as usize].next = b;
-        self.nodes[b as usize].prev = a;
-    }
-
-    pub(super) fn kill(&mut self, x: u32) {
-        let nd = &mut self.nodes[x as usize];
-        if nd.alive {
-            nd.alive = false;
-            nd.version = nd.version.wrapping_add(1);
-            self.alive -= 1;
-        }
     }
 
     /// Walks the loops through `a` and `b` in turn; returns the start and size of the
     /// one that closes first (cost: twice the smaller size).
     pub(super) fn smaller_loop(&self, a: u32, b: u32) -> Result<(u32, usize), FillError> {
-        let (mut ca, mut cb) = (a, b);
-        for n in 1..=self.nodes.len() {
-            ca = self.nodes[ca as usize].next;
-            if ca == a {
-                return Ok((a, n));
-            }
-            cb = self.nodes[cb as usize].next;
-            if cb == b {
-                return Ok((b, n));
-            }
-        }
-        Err(FillError::internal(
-            "internal: a front is not a closed loop",
-        ))
-    }
-
-    pub(super) fn front_nodes(&self, start: u32) -> Vec<u32> {
-        let mut out = vec![start];
-        let mut c = self.nodes[start as usize].next;
-        while c != start && out.len() <= self.nodes.len() {
-            out.push(c);
-            c = self.nodes[c as usize].next;
-        }
-        out
+        self.ring
+            .shorter_cycle(a, b)
+            .ok_or_else(|| FillError::internal("internal: a front is not a closed loop"))
     }
 
     /// Closes a front of at most four vertices when it can.
     pub(super) fn close_small(&mut self, f: u32, start: u32) -> Result<(), FillError> {
-        let size = self.front_size[f as usize];
+        let size = self.ring.front_size[f as usize];
         if size > 4 {
             return Ok(());
         }
-        let ns = self.front_nodes(start);
+        let ns = self.ring.cycle(start);
         if ns.len() != size {
             return Err(FillError::internal(format!(
                 "internal: front of {} nodes recorded as {size}",
                 ns.len()
             )));
         }
-        let vs: Vec<u32> = ns.iter().map(|&c| self.nodes[c as usize].v).collect();
+        let vs: Vec<u32> = ns
+            .iter()
+            .map(|&c| self.ring.nodes[c as usize].vert)
+            .collect();
         match size {
             0..=2 => {}
             3 => {
@@ -413,7 +366,7 @@ impl<'a> Builder<'a> {
             }
         }
         for c in ns {
-            self.kill(c);
+            self.ring.kill(c);
         }
         Ok(())
     }
@@ -422,12 +375,15 @@ impl<'a> Builder<'a> {
     /// every front edge, if all those triangles pass the step checks. Returns whether
     /// it did.
     pub(super) fn close_fan(&mut self, start: u32) -> bool {
-        let ns = self.front_nodes(start);
+        let ns = self.ring.cycle(start);
         let m = ns.len();
-        if m < 3 || m != self.front_size[self.nodes[start as usize].front as usize] {
+        if m < 3 || m != self.ring.front_size[self.ring.nodes[start as usize].front as usize] {
             return false;
         }
-        let vs: Vec<u32> = ns.iter().map(|&c| self.nodes[c as usize].v).collect();
+        let vs: Vec<u32> = ns
+            .iter()
+            .map(|&c| self.ring.nodes[c as usize].vert)
+            .collect();
         let pts: Vec<DVec3> = vs.iter().map(|&v| self.pos[v as usize]).collect();
         let c = measure::centroid(&pts);
         let mut up = vs.iter().map(|&v| self.vnormal(v)).sum::<DVec3>();
@@ -439,7 +395,7 @@ impl<'a> Builder<'a> {
         for j in 0..m {
             let t = [pts[j], pts[(j + 1) % m], c];
             let nr = measure::tri_normal_raw(t[0], t[1], t[2]).normalize_or_zero();
-            let behind = self.nodes[ns[j] as usize].behind;
+            let behind = self.ring.nodes[ns[j] as usize].data.behind;
             if measure::smallest_angle_sin(t[0], t[1], t[2]) < min_sin
                 || nr.dot(up) <= 0.0
                 || nr.dot(behind) < FOLD_COS
@@ -464,19 +420,19 @@ impl<'a> Builder<'a> {
             self.emit([vs[j], vs[(j + 1) % m], id]);
         }
         for n in ns {
-            self.kill(n);
+            self.ring.kill(n);
         }
         true
     }
 
     pub(super) fn rekey(&mut self, x: u32) {
-        if !self.nodes[x as usize].alive {
+        if !self.ring.nodes[x as usize].alive {
             return;
         }
         let ev = self.eval(x);
-        let nd = &mut self.nodes[x as usize];
+        let nd = &mut self.ring.nodes[x as usize];
         nd.version = nd.version.wrapping_add(1);
-        nd.blocked = false;
+        nd.data.blocked = false;
         self.heap.push(Entry {
             key: ev.theta,
             node: x,
@@ -492,26 +448,26 @@ impl<'a> Builder<'a> {
         for x in 0..self.k as u32 {
             self.rekey(x);
         }
-        while self.alive > 0 {
+        while self.ring.alive().len() > 0 {
             self.ctx.deadline.check()?;
             let Some(e) = self.heap.pop() else {
                 return Err(FillError::internal(
                     "internal: front vertices left without a queue entry",
                 ));
             };
-            let nd = &self.nodes[e.node as usize];
+            let nd = &self.ring.nodes[e.node as usize];
             if !nd.alive || nd.version != e.version {
                 continue;
             }
-            if nd.blocked {
+            if nd.data.blocked {
                 // every vertex is set aside: close a small front around a centre vertex
                 let f = nd.front as usize;
-                if self.front_size[f] <= FAN_MAX && self.close_fan(e.node) {
+                if self.ring.front_size[f] <= FAN_MAX && self.close_fan(e.node) {
                     continue;
                 }
                 return Err(FillError::stuck(format!(
                     "the front is stuck: no valid step at any of its {} vertices",
-                    self.alive
+                    self.ring.alive().len()
                 )));
             }
             self.steps += 1;
@@ -519,7 +475,7 @@ impl<'a> Builder<'a> {
             if cap > 0 && self.tris.len() > cap {
                 return Err(FillError::TooLarge(TooLarge::Front {
                     cap,
-                    front: self.alive,
+                    front: self.ring.alive().len(),
                 }));
             }
             if self.steps > self.p.max_steps {
@@ -529,14 +485,14 @@ impl<'a> Builder<'a> {
                     self.applied,
                     self.set_aside,
                     self.tris.len(),
-                    self.alive
+                    self.ring.alive().len()
                 )));
             }
             let ev = self.eval(e.node);
             if ev.theta > e.key + 1e-12 {
                 if let Some(top) = self.heap.peek() {
                     if top.key < ev.theta {
-                        let nd = &mut self.nodes[e.node as usize];
+                        let nd = &mut self.ring.nodes[e.node as usize];
                         nd.version = nd.version.wrapping_add(1);
                         self.heap.push(Entry {
                             key: ev.theta,
@@ -552,17 +508,17 @@ impl<'a> Builder<'a> {
                 Some(plan) => {
                     self.applied += 1;
                     self.apply(plan)?;
-                    if self.alive > DIVERGE_FACTOR * self.k + 64 {
+                    if self.ring.alive().len() > DIVERGE_FACTOR * self.k + 64 {
                         return Err(FillError::stuck(format!(
                             "the front diverges: {} front vertices from a loop of {} after {} steps",
-                            self.alive, self.k, self.steps
+                            self.ring.alive().len(), self.k, self.steps
                         )));
                     }
                 }
                 None => {
-                    let nd = &mut self.nodes[e.node as usize];
+                    let nd = &mut self.ring.nodes[e.node as usize];
                     nd.version = nd.version.wrapping_add(1);
-                    nd.blocked = true;
+                    nd.data.blocked = true;
                     self.set_aside += 1;
                     self.heap.push(Entry {
                         key: ev.theta + BLOCKED,

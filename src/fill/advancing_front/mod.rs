@@ -99,7 +99,7 @@ mod step;
 #[cfg(test)]
 mod tests;
 
-use super::kit::front::{edge_key, Entry, FrontQueue};
+use super::kit::front::{edge_key, Entry, FrontQueue, Ring};
 use super::kit::{fair, FillContext, FillError, TooLarge};
 use crate::fasthash::FxSet;
 use crate::fasthash::HashMap;

@@ -8,21 +8,21 @@ use super::*;
 impl Builder<'_> {
     /// The angle and local frame at a front node.
     pub(super) fn eval(&self, x: u32) -> Eval {
-        let nd = &self.nodes[x as usize];
+        let nd = &self.ring.nodes[x as usize];
         let (p, n) = (nd.prev, nd.next);
         let pi = self.npos(x);
         let pp = self.npos(p);
         let pn = self.npos(n);
-        let mut ni = self.vnormal(nd.v);
-        let size = self.front_size[nd.front as usize];
+        let mut ni = self.vnormal(nd.vert);
+        let size = self.ring.front_size[nd.front as usize];
         let w = ((size as f64 / 10.0).round() as usize)
             .min(size.saturating_sub(1) / 2)
             .max(1);
         let (mut sl, mut sr) = (DVec3::ZERO, DVec3::ZERO);
         let (mut cl, mut cr) = (x, x);
         for _ in 0..w {
-            cl = self.nodes[cl as usize].prev;
-            cr = self.nodes[cr as usize].next;
+            cl = self.ring.nodes[cl as usize].prev;
+            cr = self.ring.nodes[cr as usize].next;
             sl += self.npos(cl) - pi;
             sr += self.npos(cr) - pi;
         }
@@ -45,9 +45,9 @@ impl Builder<'_> {
         let (la, lb) = (a.length(), b.length());
         let ap = a - nc * a.dot(nc);
         let bp = b - nc * b.dot(nc);
-        let s_local = (self.size[nd.v as usize]
-            + self.size[self.nodes[p as usize].v as usize]
-            + self.size[self.nodes[n as usize].v as usize])
+        let s_local = (self.size[nd.vert as usize]
+            + self.size[self.ring.nodes[p as usize].vert as usize]
+            + self.size[self.ring.nodes[n as usize].vert as usize])
             / 3.0;
         let l = 0.5 * (0.5 * (la + lb)) + 0.5 * s_local;
         let (theta, a_hat) = if ap.length() > 1e-9 * la && bp.length() > 1e-9 * lb {
@@ -73,8 +73,8 @@ impl Builder<'_> {
             }
         };
         let kappa = 0.5
-            * (taubin(pp, self.vnormal(self.nodes[p as usize].v))
-                + taubin(pn, self.vnormal(self.nodes[n as usize].v)));
+            * (taubin(pp, self.vnormal(self.ring.nodes[p as usize].vert))
+                + taubin(pn, self.vnormal(self.ring.nodes[n as usize].vert)));
         let slope = if la > 0.0 && lb > 0.0 {
             0.5 * (nc.dot(a) / la + nc.dot(b) / lb)
         } else {
@@ -107,7 +107,7 @@ impl Builder<'_> {
     /// The nearest node of `x`'s front within `r` of `q`, other than `x` and its
     /// two neighbours.
     pub(super) fn nearest_front_node(&mut self, x: u32, q: DVec3, r: f64) -> Option<u32> {
-        let nd = &self.nodes[x as usize];
+        let nd = &self.ring.nodes[x as usize];
         let (f, p, n) = (nd.front, nd.prev, nd.next);
         let mut ids = std::mem::take(&mut self.node_scratch);
         ids.clear();
@@ -115,11 +115,11 @@ impl Builder<'_> {
             .query(q - DVec3::splat(r), q + DVec3::splat(r), &mut ids);
         let mut best: Option<(f64, u32)> = None;
         for &c in &ids {
-            let cn = &self.nodes[c as usize];
+            let cn = &self.ring.nodes[c as usize];
             if !cn.alive || cn.front != f || c == x || c == p || c == n {
                 continue;
             }
-            let d = (self.pos[cn.v as usize] - q).length();
+            let d = (self.pos[cn.vert as usize] - q).length();
             if d <= r && best.is_none_or(|(bd, bc)| d < bd || (d == bd && c < bc)) {
                 best = Some((d, c));
             }
@@ -132,9 +132,13 @@ impl Builder<'_> {
 
     /// Checks the step that replaces `x` by `slots` on its front.
     pub(super) fn check(&mut self, x: u32, ev: &Eval, slots: Vec<Slot>) -> Option<Plan> {
-        let nd = self.nodes[x as usize].clone();
+        let nd = self.ring.nodes[x as usize].clone();
         let (p, n) = (nd.prev, nd.next);
-        let (vi, vp, vn) = (nd.v, self.nodes[p as usize].v, self.nodes[n as usize].v);
+        let (vi, vp, vn) = (
+            nd.vert,
+            self.ring.nodes[p as usize].vert,
+            self.ring.nodes[n as usize].vert,
+        );
         let base = self.pos.len() as u32;
         let mut new_pos = Vec::new();
         let mut s = Vec::with_capacity(slots.len());
@@ -149,7 +153,7 @@ impl Builder<'_> {
                     new_pos.push(q);
                 }
                 Slot::Merge(w) => {
-                    let wn = &self.nodes[w as usize];
+                    let wn = &self.ring.nodes[w as usize];
                     if merged.is_some()
                         || !wn.alive
                         || wn.front != nd.front
@@ -160,7 +164,7 @@ impl Builder<'_> {
                         return None;
                     }
                     merged = Some(w);
-                    s.push(wn.v);
+                    s.push(wn.vert);
                 }
             }
         }
@@ -197,24 +201,24 @@ impl Builder<'_> {
             normals.push(nr);
         }
         // no fold over the triangles behind the front edges it closes
-        if normals[0].dot(self.nodes[p as usize].behind) < FOLD_COS
-            || normals[m].dot(nd.behind) < FOLD_COS
+        if normals[0].dot(self.ring.nodes[p as usize].data.behind) < FOLD_COS
+            || normals[m].dot(nd.data.behind) < FOLD_COS
         {
             return None;
         }
         // edges: consumed front edges, new interior edges, new front edges
         let mut consumed: Vec<(u32, u32)> = vec![(vp, vi), (vi, vn)];
         if let Some(w) = merged {
-            let wv = self.nodes[w as usize].v;
-            if self.nodes[n as usize].next == w {
+            let wv = self.ring.nodes[w as usize].vert;
+            if self.ring.nodes[n as usize].next == w {
                 consumed.push((vn, wv));
-                if normals[m].dot(self.nodes[n as usize].behind) < FOLD_COS {
+                if normals[m].dot(self.ring.nodes[n as usize].data.behind) < FOLD_COS {
                     return None;
                 }
             }
-            if self.nodes[p as usize].prev == w {
+            if self.ring.nodes[p as usize].prev == w {
                 consumed.push((wv, vp));
-                if normals[0].dot(self.nodes[w as usize].behind) < FOLD_COS {
+                if normals[0].dot(self.ring.nodes[w as usize].data.behind) < FOLD_COS {
                     return None;
                 }
             }
@@ -340,7 +344,7 @@ impl Builder<'_> {
 
     pub(super) fn apply(&mut self, plan: Plan) -> Result<(), FillError> {
         let x = plan.x;
-        let nd = self.nodes[x as usize].clone();
+        let nd = self.ring.nodes[x as usize].clone();
         let (p, n, f) = (nd.prev, nd.next, nd.front);
         for q in &plan.new_pos {
             self.pos.push(*q);
@@ -367,8 +371,8 @@ impl Builder<'_> {
                 }
             }
         }
-        self.kill(x);
-        self.nodes[p as usize].behind = tn[0];
+        self.ring.kill(x);
+        self.ring.nodes[p as usize].data.behind = tn[0];
         let mut touched = vec![p, n];
         touched.extend_from_slice(&chain);
         let mut fronts = vec![f];
@@ -376,57 +380,48 @@ impl Builder<'_> {
             None => {
                 let mut prev = p;
                 for &c in &chain {
-                    self.link(prev, c);
+                    self.ring.link(prev, c);
                     prev = c;
                 }
-                self.link(prev, n);
-                self.front_size[f as usize] = self.front_size[f as usize] + m - 1;
+                self.ring.link(prev, n);
+                self.ring.front_size[f as usize] = self.ring.front_size[f as usize] + m - 1;
             }
             Some(jm) => {
                 let w = chain[jm];
-                let old_next = self.nodes[w as usize].next;
-                let old_behind = self.nodes[w as usize].behind;
-                let wv = self.nodes[w as usize].v;
+                let old_next = self.ring.nodes[w as usize].next;
+                let old_behind = self.ring.nodes[w as usize].data.behind;
+                let wv = self.ring.nodes[w as usize].vert;
                 let w2 = self.new_node(wv, f, old_behind);
                 touched.push(w2);
                 // loop 2: p, chain[..jm], w2, old_next ...
                 let mut prev = p;
                 for &c in &chain[..jm] {
-                    self.link(prev, c);
+                    self.ring.link(prev, c);
                     prev = c;
                 }
-                self.link(prev, w2);
-                self.link(w2, old_next);
+                self.ring.link(prev, w2);
+                self.ring.link(w2, old_next);
                 // loop 1: w, chain[jm+1..], n ...
-                self.nodes[w as usize].behind = tn[jm + 1];
+                self.ring.nodes[w as usize].data.behind = tn[jm + 1];
                 let mut prev = w;
                 for &c in &chain[jm + 1..] {
-                    self.link(prev, c);
+                    self.ring.link(prev, c);
                     prev = c;
                 }
-                self.link(prev, n);
-                let total = self.front_size[f as usize] + m - 1; // -1 (x) + (m-1) new + 1 (w2)
-                let f2 = self.front_size.len() as u32;
+                self.ring.link(prev, n);
+                let total = self.ring.front_size[f as usize] + m - 1; // -1 (x) + (m-1) new + 1 (w2)
                 let (small, size) = self.smaller_loop(w, w2)?;
-                let mut c = small;
-                loop {
-                    self.nodes[c as usize].front = f2;
-                    c = self.nodes[c as usize].next;
-                    if c == small {
-                        break;
-                    }
-                }
-                self.front_size.push(size);
-                self.front_size[f as usize] = match total.checked_sub(size) {
-                    Some(x) => x,
-                    None => return Err(FillError::internal("internal: front sizes out of step")),
-                };
+                self.ring.front_size[f as usize] = total;
+                let f2 = self
+                    .ring
+                    .split_off(small, size, 0)
+                    .ok_or_else(|| FillError::internal("internal: front sizes out of step"))?;
                 fronts.push(f2);
             }
         }
         for &fr in &fronts {
             let start = touched.iter().copied().find(|&t| {
-                let tn = &self.nodes[t as usize];
+                let tn = &self.ring.nodes[t as usize];
                 tn.alive && tn.front == fr
             });
             if let Some(s) = start {

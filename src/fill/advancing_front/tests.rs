@@ -710,11 +710,8 @@ fn expired_deadline_times_out() {
     let policy = Policy::default();
     let hole = Hole::new(0, &mesh, lp, &policy);
     let ctx = FillContext {
-        mesh: &mesh,
-        hole: &hole,
-        policy: &policy,
         deadline: Deadline(Some(std::time::Instant::now())),
-        checker: None,
+        ..FillContext::new(&mesh, &hole, &policy)
     };
     assert_eq!(fill(&ctx), Err(FillError::Timeout));
 }

@@ -734,13 +734,7 @@ mod tests {
             mean_edge_length: 0.0,
             class: crate::report::HoleClass::Small,
         };
-        let ctx = FillContext {
-            mesh: &mesh,
-            hole: &hole,
-            policy: &policy,
-            deadline: Deadline::none(),
-            checker: None,
-        };
+        let ctx = FillContext::new(&mesh, &hole, &policy);
         let mut rng = ChaCha8Rng::seed_from_u64(1);
         use rand::SeedableRng;
         let y = de_search(&xs, &lo, &hi, 6.0, &ctx, &mut rng, &Deadline::none()).unwrap();

@@ -288,11 +288,8 @@ fn expired_deadline_times_out() {
     let policy = Policy::default();
     let hole = Hole::new(0, &mesh, lp, &policy);
     let ctx = FillContext {
-        mesh: &mesh,
-        hole: &hole,
-        policy: &policy,
         deadline: Deadline(Some(std::time::Instant::now())),
-        checker: None,
+        ..FillContext::new(&mesh, &hole, &policy)
     };
     assert_eq!(fill(&ctx), Err(FillError::Timeout));
 }
@@ -392,13 +389,7 @@ fn the_wrapper_keeps_a_passing_patch() {
     let (mesh, lp) = build(&raw, |_| true);
     let policy = Policy::default();
     let hole = Hole::new(0, &mesh, lp, &policy);
-    let ctx = FillContext {
-        mesh: &mesh,
-        hole: &hole,
-        policy: &policy,
-        deadline: Deadline::none(),
-        checker: None,
-    };
+    let ctx = FillContext::new(&mesh, &hole, &policy);
     let once = fill_once(&ctx).unwrap();
     crate::check::Checker::new(&mesh)
         .check_patch(&mesh, &hole.vertices, &once, &policy.checks)

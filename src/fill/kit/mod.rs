@@ -76,6 +76,19 @@ impl FillContext<'_> {
     }
 }
 
+impl<'a> FillContext<'a> {
+    /// The context of `hole` without deadline or checker.
+    pub fn new(mesh: &'a Mesh, hole: &'a Hole, policy: &'a Policy) -> FillContext<'a> {
+        FillContext {
+            mesh,
+            hole,
+            policy,
+            deadline: Deadline::none(),
+            checker: None,
+        }
+    }
+}
+
 /// Runs `method` on the loop `lp` of `mesh` as hole 0, without deadline or checker
 /// (the methods' unit tests).
 #[cfg(test)]
@@ -86,14 +99,7 @@ pub(crate) fn run_on(
     method: impl Fn(&FillContext) -> Result<crate::patch::Patch, FillError>,
 ) -> (Hole, Result<crate::patch::Patch, FillError>) {
     let hole = Hole::new(0, mesh, lp, policy);
-    let ctx = FillContext {
-        mesh,
-        hole: &hole,
-        policy,
-        deadline: Deadline::none(),
-        checker: None,
-    };
-    let r = method(&ctx);
+    let r = method(&FillContext::new(mesh, &hole, policy));
     (hole, r)
 }
 

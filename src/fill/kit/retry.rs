@@ -415,7 +415,6 @@ fn repair_by_retriangulation(
 mod tests {
     use super::*;
     use crate::fill::kit::relax::tangential_relax;
-    use crate::fill::kit::Deadline;
     use crate::mesh::Mesh;
     use crate::patch::Hole;
     use crate::testutil::{cut_faces, grid};
@@ -464,13 +463,7 @@ mod tests {
             .min_by(|a, b| a.len().cmp(&b.len()))
             .unwrap();
         let hole = Hole::new(0, &mesh, lp, &policy);
-        let ctx = FillContext {
-            mesh: &mesh,
-            hole: &hole,
-            policy: &policy,
-            deadline: Deadline::none(),
-            checker: None,
-        };
+        let ctx = FillContext::new(&mesh, &hole, &policy);
         let mut patch = kit_fill(&ctx).unwrap();
         let checker = Checker::new(&mesh);
         checker

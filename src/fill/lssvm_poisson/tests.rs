@@ -311,11 +311,8 @@ fn a_passed_deadline_is_a_timeout() {
     let policy = Policy::default();
     let hole = Hole::new(0, &mesh, lp, &policy);
     let ctx = FillContext {
-        mesh: &mesh,
-        hole: &hole,
-        policy: &policy,
         deadline: Deadline(Some(std::time::Instant::now())),
-        checker: None,
+        ..FillContext::new(&mesh, &hole, &policy)
     };
     assert_eq!(fill(&ctx), Err(FillError::Timeout));
 }
@@ -338,13 +335,7 @@ fn other_initial_patches_close_and_stay_on_the_sphere() {
     let (mesh, lp) = sphere_case(4, 0.3);
     let policy = Policy::default();
     let hole = Hole::new(0, &mesh, lp, &policy);
-    let ctx = FillContext {
-        mesh: &mesh,
-        hole: &hole,
-        policy: &policy,
-        deadline: Deadline::none(),
-        checker: None,
-    };
+    let ctx = FillContext::new(&mesh, &hole, &policy);
     let l = hole.mean_edge_length;
     for start in [Start::MinArea, Start::ResidualFront] {
         let patch = fill_with(&ctx, start).unwrap();

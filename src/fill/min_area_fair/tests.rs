@@ -357,13 +357,7 @@ fn voronoi_normalisation_beats_the_raw_cotangent_operator_on_the_sphere() {
     // smaller triangles than the ring around it
     for (level, angle) in [(4usize, 14.0f64), (5, 30.0)] {
         let (mesh, hole, policy) = sphere_case(level, angle);
-        let ctx = FillContext {
-            mesh: &mesh,
-            hole: &hole,
-            policy: &policy,
-            deadline: Deadline::none(),
-            checker: None,
-        };
+        let ctx = FillContext::new(&mesh, &hole, &policy);
         let patch = fill(&ctx).unwrap();
         let err = |norm| {
             let local = fair::local_from_patch(&mesh, &hole, &patch, 2);

@@ -101,7 +101,7 @@ mod wave;
 #[cfg(test)]
 mod tests;
 
-use super::kit::front::{edge_key, Entry, FrontQueue};
+use super::kit::front::{edge_key, Entry, FrontQueue, Ring};
 use super::kit::{check_patch_size, residual, retry, Cause, FillContext, FillError, TooLarge};
 use crate::fasthash::{HashMap, HashSet};
 use crate::geometry::grid::PlaneGrid;

@@ -9,17 +9,17 @@ use super::*;
 impl Wave {
     /// One step at `node`; false when no variant is valid.
     pub(super) fn process(&mut self, node: u32, alpha: f64, beta: f64) -> bool {
-        let nd = self.nodes[node as usize];
+        let nd = self.ring.nodes[node as usize];
         let (pn, nn) = (nd.prev, nd.next);
         let nv = self.expected_normal(node);
-        if self.relaxed && self.front_size[nd.front as usize] <= SMALL_FRONT {
+        if self.relaxed && self.ring.front_size[nd.front as usize] <= SMALL_FRONT {
             return self.clip_small_front(node);
         }
-        if self.front_size[nd.front as usize] == 3 {
+        if self.ring.front_size[nd.front as usize] == 3 {
             let t = [
-                self.nodes[pn as usize].vert,
+                self.ring.nodes[pn as usize].vert,
                 nd.vert,
-                self.nodes[nn as usize].vert,
+                self.ring.nodes[nn as usize].vert,
             ];
             if !self.valid(nd.vert, &[t], &[], nv, 0.0) {
                 return false;
@@ -28,7 +28,7 @@ impl Wave {
             for x in [pn, node, nn] {
                 self.kill(x);
             }
-            self.front_size[nd.front as usize] = 0;
+            self.ring.front_size[nd.front as usize] = 0;
             return true;
         }
         let theta = self.angle(node, nv);
@@ -58,14 +58,14 @@ impl Wave {
     pub(super) fn side_elevation(&self, node: u32, nrm: DVec3, forward: bool) -> f64 {
         let v = self.p(node);
         let other_end = if forward {
-            self.nodes[node as usize].prev
+            self.ring.nodes[node as usize].prev
         } else {
-            self.nodes[node as usize].next
+            self.ring.nodes[node as usize].next
         };
         let mut a = node;
         let (mut sum, mut n) = (0.0, 0usize);
         for _ in 0..FRONT_SPAN {
-            let nd = self.nodes[a as usize];
+            let nd = self.ring.nodes[a as usize];
             a = if forward { nd.next } else { nd.prev };
             if a == node || (n > 0 && a == other_end) {
                 break;
@@ -88,17 +88,17 @@ impl Wave {
     /// tests (best smallest angle first among ears facing the front's mean normal, else
     /// the best ear). The dispatcher's checks judge the result.
     pub(super) fn clip_small_front(&mut self, start: u32) -> bool {
-        let f = self.nodes[start as usize].front as usize;
+        let f = self.ring.nodes[start as usize].front as usize;
         let mut ring = vec![start];
-        let mut a = self.nodes[start as usize].next;
+        let mut a = self.ring.nodes[start as usize].next;
         while a != start && ring.len() <= SMALL_FRONT {
             ring.push(a);
-            a = self.nodes[a as usize].next;
+            a = self.ring.nodes[a as usize].next;
         }
         if a != start || ring.len() < 3 {
             return false;
         }
-        let vert = |w: &Wave, n: u32| w.nodes[n as usize].vert;
+        let vert = |w: &Wave, n: u32| w.ring.nodes[n as usize].vert;
         let pts: Vec<DVec3> = ring.iter().map(|&n| self.p(n)).collect();
         let nrm = unit_or(measure::newell_normal(&pts), self.expected_normal(start));
         while ring.len() > 3 {
@@ -128,14 +128,14 @@ impl Wave {
         for n in ring {
             self.kill(n);
         }
-        self.front_size[f] = 0;
+        self.ring.front_size[f] = 0;
         self.stats.clipped_fronts += 1;
         true
     }
 
     /// Direction from the vertex at fraction `f` of θ from the next edge (see module doc).
     pub(super) fn direction(&self, node: u32, nrm: DVec3, theta: f64, f: f64) -> DVec3 {
-        let nd = self.nodes[node as usize];
+        let nd = self.ring.nodes[node as usize];
         let v = self.p(node);
         let en = unit_or(self.p(nd.next) - v, DVec3::ZERO);
         let tn = unit_or(en - nrm * en.dot(nrm), nrm.any_orthonormal_vector());
@@ -182,7 +182,7 @@ impl Wave {
         self.node_grid.query_box(x - d, x + d, &mut ids);
         let mut best: Option<(f64, u32)> = None;
         for &id in &ids {
-            let nd = self.nodes[id as usize];
+            let nd = self.ring.nodes[id as usize];
             if !nd.alive || nd.front != front || skip.contains(&id) {
                 continue;
             }
@@ -221,11 +221,11 @@ impl Wave {
         self.node_grid.query_box(x - d, x + d, &mut ids);
         let mut hit = false;
         for &id in &ids {
-            let nd = self.nodes[id as usize];
+            let nd = self.ring.nodes[id as usize];
             if !nd.alive || nd.front != front {
                 continue;
             }
-            let b = self.nodes[nd.next as usize].vert;
+            let b = self.ring.nodes[nd.next as usize].vert;
             if skip.contains(&nd.vert) || skip.contains(&b) {
                 continue;
             }
@@ -259,7 +259,7 @@ impl Wave {
         theta: f64,
         [np, nv, nq]: [DVec3; 3],
     ) -> Option<Plan> {
-        let nd = self.nodes[node as usize];
+        let nd = self.ring.nodes[node as usize];
         let (pn, nn) = (nd.prev, nd.next);
         let (p, v, q) = (self.p(pn), self.p(node), self.p(nn));
         let mut pts: Vec<DVec3> = (1..=m)
@@ -300,9 +300,9 @@ impl Wave {
                     return None;
                 }
                 let (pv, vv, qv) = (
-                    self.nodes[pn as usize].vert,
+                    self.ring.nodes[pn as usize].vert,
                     nd.vert,
-                    self.nodes[nn as usize].vert,
+                    self.ring.nodes[nn as usize].vert,
                 );
                 if self.near_front_edge(x, 0.5 * r, nd.front, [pv, vv, qv]) {
                     return None;
@@ -328,7 +328,7 @@ impl Wave {
         let ids: Vec<u32> = chain
             .iter()
             .map(|it| match *it {
-                Item::Node(a) => self.nodes[a as usize].vert,
+                Item::Node(a) => self.ring.nodes[a as usize].vert,
                 Item::New(x) => {
                     newpos.push(x);
                     base + newpos.len() as u32 - 1
@@ -343,8 +343,8 @@ impl Wave {
             if let (Some(a), Some(b)) = (old(j), old(j + 1)) {
                 if self.edge_exists(ids[j], ids[j + 1]) {
                     // a merge into the second neighbour closes the edge between them (zip)
-                    let zip = (a == pn && b == self.nodes[pn as usize].prev)
-                        || (b == nn && a == self.nodes[nn as usize].next);
+                    let zip = (a == pn && b == self.ring.nodes[pn as usize].prev)
+                        || (b == nn && a == self.ring.nodes[nn as usize].next);
                     if !zip {
                         return None;
                     }
@@ -362,10 +362,10 @@ impl Wave {
             }
         };
         let last = chain.len() - 1;
-        let pp = self.p(self.nodes[pn as usize].prev);
-        let qq = self.p(self.nodes[nn as usize].next);
+        let pp = self.p(self.ring.nodes[pn as usize].prev);
+        let qq = self.p(self.ring.nodes[nn as usize].next);
         let front_angle = |at: DVec3, a: DVec3, b: DVec3| measure::angle_at(at, a, b);
-        if self.front_size[nd.front as usize] > 3
+        if self.ring.front_size[nd.front as usize] > 3
             && !self.relaxed
             && (front_angle(p, pp, pos_of(1)) < MIN_FRONT_ANGLE
                 || front_angle(q, pos_of(last - 1), qq) < MIN_FRONT_ANGLE)
@@ -396,9 +396,9 @@ impl Wave {
         merged: Option<u32>,
         nrm: DVec3,
     ) -> bool {
-        let nd = self.nodes[node as usize];
+        let nd = self.ring.nodes[node as usize];
         let last = chain.len() - 1;
-        let base = self.nodes.len() as u32;
+        let base = self.ring.nodes.len() as u32;
         // node ids after the step: chain interior items get fresh ids base + j - 1
         let cnode = |j: usize| -> u32 {
             match chain[j] {
@@ -411,13 +411,13 @@ impl Wave {
             if x >= base {
                 ids[(x - base) as usize + 1]
             } else {
-                self.nodes[x as usize].vert
+                self.ring.nodes[x as usize].vert
             }
         };
         if let Some(a) = merged {
             if let Some(jm) = (1..last).find(|&j| matches!(chain[j], Item::Node(x) if x == a)) {
                 let b = cnode(jm);
-                let an = self.nodes[a as usize].next;
+                let an = self.ring.nodes[a as usize].next;
                 let bn = cnode(jm + 1);
                 over.retain(|&(x, _)| x != b);
                 over.push((a, bn));
@@ -428,7 +428,7 @@ impl Wave {
             over.iter()
                 .find(|&&(y, _)| y == x)
                 .map(|&(_, z)| z)
-                .unwrap_or_else(|| self.nodes[x as usize].next)
+                .unwrap_or_else(|| self.ring.nodes[x as usize].next)
         };
         let np = self.pos.len();
         let at = |i: u32| -> DVec3 {
@@ -662,7 +662,7 @@ impl Wave {
     }
 
     pub(super) fn commit(&mut self, node: u32, plan: Plan) {
-        let nd = self.nodes[node as usize];
+        let nd = self.ring.nodes[node as usize];
         let front = nd.front;
         let mut chain_nodes: Vec<u32> = Vec::with_capacity(plan.chain.len());
         let mut verts: Vec<u32> = Vec::with_capacity(plan.chain.len());
@@ -672,10 +672,10 @@ impl Wave {
             match *it {
                 Item::Node(a) if j == 0 || j == last => {
                     chain_nodes.push(a);
-                    verts.push(self.nodes[a as usize].vert);
+                    verts.push(self.ring.nodes[a as usize].vert);
                 }
                 Item::Node(a) => {
-                    let vert = self.nodes[a as usize].vert;
+                    let vert = self.ring.nodes[a as usize].vert;
                     let b = self.new_node(vert, 0, 0, front);
                     split = Some((a, b));
                     self.stats.merges += 1;
@@ -695,12 +695,12 @@ impl Wave {
             self.add_triangle([verts[j], nd.vert, verts[j + 1]]);
         }
         for j in 0..last {
-            self.nodes[chain_nodes[j] as usize].next = chain_nodes[j + 1];
-            self.nodes[chain_nodes[j + 1] as usize].prev = chain_nodes[j];
+            self.ring.nodes[chain_nodes[j] as usize].next = chain_nodes[j + 1];
+            self.ring.nodes[chain_nodes[j + 1] as usize].prev = chain_nodes[j];
         }
         self.kill(node);
         let f = front as usize;
-        self.front_size[f] = self.front_size[f] + last - 1 - 1;
+        self.ring.front_size[f] = self.ring.front_size[f] + last - 1 - 1;
         let mut touched = chain_nodes.clone();
         if let Some((a, b)) = split {
             self.split(a, b);
@@ -714,54 +714,29 @@ impl Wave {
     /// Splits a front at two nodes of the same vertex into two fronts; a front of two
     /// nodes left over is one edge seen from both sides and is zipped.
     pub(super) fn split(&mut self, a: u32, b: u32) {
-        let an = self.nodes[a as usize].next;
-        let bn = self.nodes[b as usize].next;
-        self.nodes[a as usize].next = bn;
-        self.nodes[bn as usize].prev = a;
-        self.nodes[b as usize].next = an;
-        self.nodes[an as usize].prev = b;
-        // walk both cycles together; the shorter one becomes a new front
-        let (mut x, mut y) = (a, b);
-        let mut count = 0usize;
-        let bound = self.nodes.len();
-        let small = loop {
-            count += 1;
-            x = self.nodes[x as usize].next;
-            y = self.nodes[y as usize].next;
-            if x == a {
-                break a;
-            }
-            if y == b {
-                break b;
-            }
-            if count > bound {
-                self.corrupt = true;
-                return;
-            }
+        let an = self.ring.nodes[a as usize].next;
+        let bn = self.ring.nodes[b as usize].next;
+        self.ring.link(a, bn);
+        self.ring.link(b, an);
+        // the shorter of the two rings becomes a new front
+        let Some((small, count)) = self.ring.shorter_cycle(a, b) else {
+            self.corrupt = true;
+            return;
         };
-        let old = self.nodes[a as usize].front as usize;
-        let new = self.front_size.len() as u32;
-        self.front_size.push(count);
-        if self.front_size[old] < count + 2 {
+        if self.ring.split_off(small, count, 2).is_none() {
             self.corrupt = true;
             return;
         }
-        self.front_size[old] -= count;
-        let mut z = small;
-        for _ in 0..count {
-            self.nodes[z as usize].front = new;
-            z = self.nodes[z as usize].next;
-        }
         for (start, f) in [
-            (a, self.nodes[a as usize].front),
-            (b, self.nodes[b as usize].front),
+            (a, self.ring.nodes[a as usize].front),
+            (b, self.ring.nodes[b as usize].front),
         ] {
-            if self.front_size[f as usize] == 2 {
-                let other = self.nodes[start as usize].next;
+            if self.ring.front_size[f as usize] == 2 {
+                let other = self.ring.nodes[start as usize].next;
                 self.stats.zips += 1;
                 self.kill(start);
                 self.kill(other);
-                self.front_size[f as usize] = 0;
+                self.ring.front_size[f as usize] = 0;
             }
         }
     }

@@ -91,13 +91,7 @@ fn measure(
     let l = loop_near(&mesh, centre);
     let k = l.len();
     let hole = Hole::new(0, &mesh, l, &policy);
-    let ctx = FillContext {
-        mesh: &mesh,
-        hole: &hole,
-        policy: &policy,
-        deadline: Deadline::none(),
-        checker: None,
-    };
+    let ctx = FillContext::new(&mesh, &hole, &policy);
     let (patch, stats) = fill_with_stats(&ctx).unwrap();
     accept(&mesh, &hole, &patch, &policy);
     let (mean, max) = stats_of(&patch, |p| err(p).abs());
@@ -162,13 +156,7 @@ fn a_front_over_a_deep_hole_stops_as_runaway_and_a_residual_variant_closes_it() 
         .edit(|s| s.wavefront.max_steps_per_vertex = 200)
         .unwrap();
     let hole = Hole::new(0, &mesh, loops[0].clone(), &policy);
-    let ctx = FillContext {
-        mesh: &mesh,
-        hole: &hole,
-        policy: &policy,
-        deadline: Deadline::none(),
-        checker: None,
-    };
+    let ctx = FillContext::new(&mesh, &hole, &policy);
     match fill_with_stats(&ctx) {
         Err(FillError::Runaway { .. }) => {}
         other => panic!("expected the runaway failure, got {:?}", other.map(|p| p.1)),
@@ -473,13 +461,7 @@ fn bunny_hole_2_residual_is_kept_unfaired_and_relaxed_around_its_fold() {
     let policy = Policy::default();
     let hole = Hole::new(2, &mesh, loops[2].clone(), &policy);
     assert_eq!(hole.len(), 42);
-    let ctx = FillContext {
-        mesh: &mesh,
-        hole: &hole,
-        policy: &policy,
-        deadline: Deadline::none(),
-        checker: None,
-    };
+    let ctx = FillContext::new(&mesh, &hole, &policy);
     let (patch, stats) = fill_with_stats(&ctx).unwrap();
     assert_eq!(stats.residual_fronts, 1, "{stats:?}");
     assert_eq!(stats.unfaired_residuals, 1, "{stats:?}");
@@ -633,13 +615,7 @@ fn a_stopped_front_is_closed_as_a_residual() {
         .unwrap();
     let l = loop_near(&mesh, SPHERE_DIR.normalize());
     let hole = Hole::new(0, &mesh, l, &policy);
-    let ctx = FillContext {
-        mesh: &mesh,
-        hole: &hole,
-        policy: &policy,
-        deadline: Deadline::none(),
-        checker: None,
-    };
+    let ctx = FillContext::new(&mesh, &hole, &policy);
     let (patch, stats) = fill_with_stats(&ctx).unwrap();
     assert!(stats.residual_fronts >= 1, "{stats:?}");
     accept(&mesh, &hole, &patch, &policy);

@@ -4,17 +4,12 @@
 
 use super::*;
 
-/// A front vertex occurrence. A vertex can be on two fronts after a split, so nodes and
-/// vertices are apart.
+/// What a wavefront node ([`Node`](crate::fill::kit::front::Node): a vertex occurrence on a front; a vertex
+/// can be on two fronts after a split) carries besides its place on the ring.
 #[derive(Clone, Copy, Debug)]
-pub(super) struct Node {
-    pub(super) vert: u32,
-    pub(super) prev: u32,
-    pub(super) next: u32,
-    pub(super) front: u32,
-    pub(super) version: u32,
+pub(super) struct NodeData {
+    /// Failed steps at the node since it last changed (its queue penalty).
     pub(super) fails: u32,
-    pub(super) alive: bool,
 }
 
 /// A triangle already in place (patch triangle or mesh face around the hole), with the
@@ -61,12 +56,10 @@ pub(super) struct Wave {
     pub(super) edges: HashSet<(u32, u32)>,
     /// Undirected mesh edges between two loop vertices.
     pub(super) mesh_edges: HashSet<(u32, u32)>,
-    pub(super) nodes: Vec<Node>,
-    pub(super) front_size: Vec<usize>,
+    /// The fronts: their nodes, sizes and the alive nodes (picked from at random).
+    pub(super) ring: Ring<NodeData>,
     /// Front nodes by θ plus a penalty of 2π per failed attempt (`data`: θ).
     pub(super) heap: FrontQueue<f64>,
-    pub(super) alive: Vec<u32>,
-    pub(super) alive_pos: Vec<usize>,
     pub(super) placed: Vec<Placed>,
     pub(super) tri_grid: PlaneGrid,
     pub(super) big: Vec<u32>,
@@ -318,11 +311,8 @@ impl Wave {
             tris: Vec::new(),
             edges: HashSet::default(),
             mesh_edges: HashSet::default(),
-            nodes: Vec::with_capacity(2 * k),
-            front_size: vec![k],
+            ring: Ring::new(k),
             heap: FrontQueue::new(),
-            alive: Vec::with_capacity(2 * k),
-            alive_pos: Vec::with_capacity(2 * k),
             placed: Vec::new(),
             tri_grid: PlaneGrid::new(CELL * len, centre, pu, pw, reach + 2.0 * len),
             big: Vec::new(),
@@ -398,44 +388,25 @@ impl Wave {
     }
 
     pub(super) fn new_node(&mut self, vert: u32, prev: u32, next: u32, front: u32) -> u32 {
-        let id = self.nodes.len() as u32;
-        self.nodes.push(Node {
-            vert,
-            prev,
-            next,
-            front,
-            version: 0,
-            fails: 0,
-            alive: true,
-        });
-        self.alive_pos.push(self.alive.len());
-        self.alive.push(id);
+        let id = self
+            .ring
+            .push(vert, prev, next, front, NodeData { fails: 0 });
         let p = self.pos[vert as usize];
         self.node_grid.insert_box(p, p, id);
         id
     }
 
     pub(super) fn kill(&mut self, n: u32) {
-        let node = &mut self.nodes[n as usize];
-        if !node.alive {
-            return;
-        }
-        node.alive = false;
-        node.version = node.version.wrapping_add(1);
-        let i = self.alive_pos[n as usize];
-        self.alive.swap_remove(i);
-        if let Some(&moved) = self.alive.get(i) {
-            self.alive_pos[moved as usize] = i;
-        }
+        self.ring.kill(n);
     }
 
     pub(super) fn p(&self, n: u32) -> DVec3 {
-        self.pos[self.nodes[n as usize].vert as usize]
+        self.pos[self.ring.nodes[n as usize].vert as usize]
     }
 
     /// Expected normal of a front node (Eq. 1 with the virtual triangle).
     pub(super) fn expected_normal(&self, n: u32) -> DVec3 {
-        let nd = self.nodes[n as usize];
+        let nd = self.ring.nodes[n as usize];
         let base = self.acc[nd.vert as usize];
         let (p, v, q) = (self.p(nd.prev), self.p(n), self.p(nd.next));
         let mut s = base;
@@ -451,7 +422,7 @@ impl Wave {
 
     /// The front angle at a node, on the hole side, in the tangent plane of `nrm`.
     pub(super) fn angle(&self, n: u32, nrm: DVec3) -> f64 {
-        let nd = self.nodes[n as usize];
+        let nd = self.ring.nodes[n as usize];
         let v = self.p(n);
         let en = self.p(nd.next) - v;
         let ep = self.p(nd.prev) - v;
@@ -468,10 +439,10 @@ impl Wave {
     pub(super) fn push(&mut self, n: u32) {
         let nrm = self.expected_normal(n);
         let theta = self.angle(n, nrm);
-        let nd = &mut self.nodes[n as usize];
+        let nd = &mut self.ring.nodes[n as usize];
         nd.version = nd.version.wrapping_add(1);
         self.heap.push(Entry {
-            key: theta + TAU * nd.fails as f64,
+            key: theta + TAU * nd.data.fails as f64,
             node: n,
             version: nd.version,
             data: theta,
@@ -480,15 +451,15 @@ impl Wave {
 
     /// Re-measures a node whose neighbourhood changed.
     pub(super) fn refresh(&mut self, n: u32) {
-        if self.nodes[n as usize].alive {
-            self.nodes[n as usize].fails = 0;
+        if self.ring.nodes[n as usize].alive {
+            self.ring.nodes[n as usize].data.fails = 0;
             self.push(n);
         }
     }
 
     pub(super) fn penalize(&mut self, n: u32) {
-        if self.nodes[n as usize].alive {
-            self.nodes[n as usize].fails += 1;
+        if self.ring.nodes[n as usize].alive {
+            self.ring.nodes[n as usize].data.fails += 1;
             self.push(n);
         }
     }
@@ -496,7 +467,7 @@ impl Wave {
     /// The current smallest entry (stale entries are dropped).
     pub(super) fn peek(&mut self) -> Option<Entry<f64>> {
         while let Some(e) = self.heap.peek() {
-            let nd = self.nodes[e.node as usize];
+            let nd = self.ring.nodes[e.node as usize];
             if nd.alive && nd.version == e.version {
                 return Some(e);
             }
@@ -523,7 +494,7 @@ impl Wave {
         let cap = opts.max_steps_per_vertex.saturating_mul(self.k);
         let mu = opts.mu.to_radians();
         let (alpha, beta) = (opts.alpha.to_radians(), opts.beta.to_radians());
-        while !self.alive.is_empty() {
+        while !self.ring.alive().is_empty() {
             ctx.deadline.check()?;
             if self.snapshot_at.contains(&self.steps) {
                 let mut copy = self.clone();
@@ -545,11 +516,13 @@ impl Wave {
                 });
             }
             let node = match self.peek() {
-                Some(e) if e.data < mu && self.nodes[e.node as usize].fails == 0 => e.node,
+                Some(e) if e.data < mu && self.ring.nodes[e.node as usize].data.fails == 0 => {
+                    e.node
+                }
                 _ => {
                     self.stats.random_picks += 1;
-                    let i = self.rng.random_range(0..self.alive.len());
-                    self.alive[i]
+                    let i = self.rng.random_range(0..self.ring.alive().len());
+                    self.ring.alive()[i]
                 }
             };
             let advanced = self.process(node, alpha, beta);
@@ -566,15 +539,15 @@ impl Wave {
                 self.stalls += 1;
                 self.stats.failed_steps += 1;
                 self.penalize(node);
-                if self.stalls > 2 * self.alive.len() + 16 && !self.relaxed {
+                if self.stalls > 2 * self.ring.alive().len() + 16 && !self.relaxed {
                     // stuck: accept thin triangles until the next step succeeds; the
                     // sliver flips repair them or the checks reject the patch
                     self.relaxed = true;
                     self.stats.relaxed_steps += 1;
                     self.stalls = 0;
-                } else if self.stalls > 2 * self.alive.len() + 16 {
+                } else if self.stalls > 2 * self.ring.alive().len() + 16 {
                     // stuck: close every remaining front as a residual loop
-                    let left = self.alive.len();
+                    let left = self.ring.alive().len();
                     return self.close_residual_fronts(ctx).map_err(|e| {
                         FillError::stuck(format!(
                             "the front is stuck (none of its {left} vertices can advance without \
@@ -590,19 +563,22 @@ impl Wave {
 
     /// Closes every remaining front with [`residual::close`] (see that module).
     pub(super) fn close_residual_fronts(&mut self, ctx: &FillContext) -> Result<(), FillError> {
-        while let Some(&start) = self.alive.first() {
+        while let Some(&start) = self.ring.alive().first() {
             ctx.deadline.check()?;
-            let f = self.nodes[start as usize].front as usize;
+            let f = self.ring.nodes[start as usize].front as usize;
             let mut ring = vec![start];
-            let mut a = self.nodes[start as usize].next;
+            let mut a = self.ring.nodes[start as usize].next;
             while a != start {
-                if ring.len() > self.nodes.len() {
+                if ring.len() > self.ring.nodes.len() {
                     return Err(FillError::internal("internal error: open front"));
                 }
                 ring.push(a);
-                a = self.nodes[a as usize].next;
+                a = self.ring.nodes[a as usize].next;
             }
-            let verts: Vec<u32> = ring.iter().map(|&n| self.nodes[n as usize].vert).collect();
+            let verts: Vec<u32> = ring
+                .iter()
+                .map(|&n| self.ring.nodes[n as usize].vert)
+                .collect();
             if verts.iter().collect::<HashSet<_>>().len() != verts.len() {
                 return Err(FillError::bad_loop(
                     "the residual front passes a vertex twice",
@@ -688,7 +664,7 @@ impl Wave {
             for node in ring {
                 self.kill(node);
             }
-            self.front_size[f] = 0;
+            self.ring.front_size[f] = 0;
             self.stats.residual_fronts += 1;
         }
         Ok(())
