@@ -410,26 +410,7 @@ fn planar_grid_hole_uvs_and_colours_are_linear_within_bound() {
     // (x + y) / 80), all linear; a round hole of radius 4 in the middle
     let g = grid_soup(20);
     let (s, _) = cut(&g, [10.0, 10.0, 0.0], 4.0);
-    let mut t = String::new();
-    for p in &s.v {
-        writeln!(
-            t,
-            "v {} {} {} {} {} {}",
-            p[0],
-            p[1],
-            p[2],
-            p[0] / 20.0,
-            p[1] / 20.0,
-            0.25 + (p[0] + p[1]) / 80.0
-        )
-        .unwrap();
-    }
-    for p in &s.v {
-        writeln!(t, "vt {} {}", p[0] / 20.0, p[1] / 20.0).unwrap();
-    }
-    for f in &s.f {
-        writeln!(t, "f {0}/{0} {1}/{1} {2}/{2}", f[0] + 1, f[1] + 1, f[2] + 1).unwrap();
-    }
+    let t = linear_grid_obj(&s);
     let dir = tempdir();
     let src = dir.path().join("grid.obj");
     std::fs::write(&src, t).unwrap();

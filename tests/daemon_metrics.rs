@@ -8,7 +8,6 @@ mod metrics_support;
 use daemon_support::*;
 use metrics_support::*;
 use serde_json::Value;
-use std::collections::HashMap;
 use std::fs;
 use std::time::{Duration, Instant};
 
@@ -106,20 +105,8 @@ fn every_counter_matches_a_run_of_20_files_with_2_failing() {
     assert!(le1 <= 19.0, "{t}");
 
     // holes by status, class and method: what the 18 logs say
-    let mut want: HashMap<String, f64> = HashMap::new();
-    for n in &names {
-        let log = Folders::log(&f.outbox, n);
-        for h in log["holes"].as_array().unwrap() {
-            let s = |k: &str| h[k].as_str().unwrap_or("none").to_string();
-            let key = format!(
-                "status=\"{}\",class=\"{}\",method=\"{}\"",
-                s("status"),
-                s("class"),
-                s("method")
-            );
-            *want.entry(key).or_default() += 1.0;
-        }
-    }
+    let logs: Vec<Value> = names.iter().map(|n| Folders::log(&f.outbox, n)).collect();
+    let want = holes_by_label(&logs);
     assert!(!want.is_empty());
     assert_eq!(family(&t, "holefill_holes_total"), want);
 

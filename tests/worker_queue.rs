@@ -356,21 +356,11 @@ fn worker_metrics_match_a_run_of_20_scans_with_2_failing() {
     results(&nats, out.path());
     let repaired = logs(out.path());
     assert_eq!(repaired.len(), 18);
-    let mut faces = 0.0;
-    let mut want: HashMap<String, f64> = HashMap::new();
-    for log in repaired.values() {
-        faces += log["before"]["faces"].as_f64().unwrap();
-        for h in log["holes"].as_array().unwrap() {
-            let s = |k: &str| h[k].as_str().unwrap_or("none").to_string();
-            let key = format!(
-                "status=\"{}\",class=\"{}\",method=\"{}\"",
-                s("status"),
-                s("class"),
-                s("method")
-            );
-            *want.entry(key).or_default() += 1.0;
-        }
-    }
+    let faces: f64 = repaired
+        .values()
+        .map(|log| log["before"]["faces"].as_f64().unwrap())
+        .sum();
+    let want = holes_by_label(repaired.values());
     assert_eq!(must(&t, "holefill_file_faces_count"), 18.0);
     assert_eq!(must(&t, "holefill_file_faces_sum"), faces);
     assert!(!want.is_empty());

@@ -107,10 +107,12 @@ pub(super) fn read(path: &Path, bytes: &[u8], caps: &Caps) -> Result<RawMesh, Io
     let mesh = match meshes.as_slice() {
         [m] => m.clone(),
         [] => return Err(bad("the document has no mesh with triangles".into())),
-        more => return Err(bad(format!(
+        more => {
+            return Err(bad(format!(
             "the document has triangles in {} meshes; holefill repairs a glTF file with one mesh",
             more.len()
-        ))),
+        )))
+        }
     };
     let mut raw = RawMesh {
         precision: Precision::F32,

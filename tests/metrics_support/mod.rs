@@ -64,3 +64,24 @@ pub fn now_secs() -> f64 {
         .unwrap()
         .as_secs_f64()
 }
+
+/// What `holefill_holes_total` must hold for these repair logs: per label set
+/// (`status="..",class="..",method=".."`), the number of holes.
+pub fn holes_by_label<'a>(
+    logs: impl IntoIterator<Item = &'a serde_json::Value>,
+) -> HashMap<String, f64> {
+    let mut want: HashMap<String, f64> = HashMap::new();
+    for log in logs {
+        for h in log["holes"].as_array().into_iter().flatten() {
+            let s = |k: &str| h[k].as_str().unwrap_or("none").to_string();
+            let key = format!(
+                "status=\"{}\",class=\"{}\",method=\"{}\"",
+                s("status"),
+                s("class"),
+                s("method")
+            );
+            *want.entry(key).or_default() += 1.0;
+        }
+    }
+    want
+}
