@@ -327,14 +327,49 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
         (report.timings.smooth_ms + report.timings.fill_ms) / 1000.0
     );
 
-    let t = Instant::now();
-    holefill::write(&args.output, &out, Some(out_format)).map_err(io_failure)?;
-    report.timings.write_ms = t.elapsed().as_secs_f64() * 1000.0;
-
-    if let Some(path) = &args.picture {
+    // The picture is drawn on its own thread while the model is written; its file is
+    // written after the model's, so that a picture never stands beside a lost model.
+    let (written, write_ms, drawn) = std::thread::scope(|s| {
+        let drawing = args.picture.as_ref().map(|_| {
+            s.spawn(|| {
+                let t = Instant::now();
+                let png = holefill::picture::render(
+                    &out,
+                    &report,
+                    &holefill::picture::Options::default(),
+                )
+                .to_png();
+                (png, t.elapsed())
+            })
+        });
         let t = Instant::now();
-        write_picture(path, &out, &report)?;
-        report.timings.picture_ms = t.elapsed().as_secs_f64() * 1000.0;
+        let written = holefill::write(&args.output, &out, Some(out_format));
+        let write_ms = t.elapsed().as_secs_f64() * 1000.0;
+        (written, write_ms, drawing.map(|h| h.join()))
+    });
+    written.map_err(io_failure)?;
+    report.timings.write_ms = write_ms;
+    if let (Some(path), Some(drawn)) = (&args.picture, drawn) {
+        let t = Instant::now();
+        let drawing_ms = match drawn {
+            Ok((Ok(png), took)) => {
+                holefill::io::write_atomic(path, &png).map_err(io_failure)?;
+                took.as_secs_f64() * 1000.0
+            }
+            Ok((Err(e), took)) => {
+                eprintln!("warning: {}: {e}", path.display());
+                took.as_secs_f64() * 1000.0
+            }
+            // a bug in the drawing loses the picture (with a warning), never the repair
+            Err(_) => {
+                eprintln!(
+                    "warning: {}: internal error while drawing the picture; none written",
+                    path.display()
+                );
+                0.0
+            }
+        };
+        report.timings.picture_ms = drawing_ms + t.elapsed().as_secs_f64() * 1000.0;
     }
 
     if let Some(path) = &args.report {
@@ -345,32 +380,6 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
     } else {
         exit::OK
     })
-}
-
-/// Renders and writes the picture of a repair. A bug in the drawing loses the picture
-/// (with a warning), never the repair.
-fn write_picture(
-    path: &Path,
-    out: &holefill::io::RawMesh,
-    report: &holefill::report::RepairReport,
-) -> Result<(), Failure> {
-    let drawn = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-        holefill::picture::render(out, report, &holefill::picture::Options::default()).to_png()
-    }));
-    match drawn {
-        Ok(Ok(png)) => holefill::io::write_atomic(path, &png).map_err(io_failure),
-        Ok(Err(e)) => {
-            eprintln!("warning: {}: {e}", path.display());
-            Ok(())
-        }
-        Err(_) => {
-            eprintln!(
-                "warning: {}: internal error while drawing the picture; none written",
-                path.display()
-            );
-            Ok(())
-        }
-    }
 }
 
 fn write_report(path: &Path, json: &str) -> Result<(), Failure> {

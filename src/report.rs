@@ -143,7 +143,8 @@ pub struct Timings {
     /// Carrying the input's attributes to the output (not part of the fill time).
     pub attributes_ms: f64,
     pub write_ms: f64,
-    /// Rendering and writing the picture (`holefill fill --picture`; 0 without).
+    /// Rendering the picture (on its own thread, while the model is written) and
+    /// writing it (`holefill fill --picture`; 0 without).
     pub picture_ms: f64,
 }
 

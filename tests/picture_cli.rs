@@ -64,8 +64,8 @@ fn fill_draws_the_repair_with_its_holes_outlined() {
     assert!(report["timings"]["picture_ms"].as_f64().unwrap() > 0.0);
 
     let (w, h, rgb) = decode(&pic);
-    // the overview (640 x 400 under a 20 px band) and one row of two close-ups
-    assert_eq!((w, h), (640, 20 + 400 + 14 + 160));
+    // the overview (512 x 320 under a 20 px band) and one row of two close-ups
+    assert_eq!((w, h), (512, 20 + 320 + 14 + 128));
     let distinct: std::collections::HashSet<&[u8]> = rgb.chunks(3).collect();
     assert!(distinct.len() > 50, "a shaded picture, not a flat one");
     let green = count(&rgb, filled());
@@ -193,6 +193,6 @@ fn the_bunny_scans_picture_shows_its_holes() {
     assert!(filled_n >= 1);
     let (w, h, rgb) = decode(&pic);
     let closeups = holes.len().min(8);
-    assert_eq!((w, h), (640, 20 + 400 + closeups.div_ceil(2) * (14 + 160)));
+    assert_eq!((w, h), (512, 20 + 320 + closeups.div_ceil(2) * (14 + 128)));
     assert!(count(&rgb, filled()) > 200 * filled_n.min(8));
 }

@@ -12,7 +12,7 @@
 //! mean normal around it).
 //!
 //! Bounded time and memory for huge meshes: memory is the image and its depth buffers
-//! (about 2 MB at the default width) plus the face numbers of the close-ups'
+//! (about 4 MB at the default width) plus the face numbers of the close-ups'
 //! neighbourhoods; the overview draws at most [`Options::max_overview_faces`] faces
 //! (every k-th one: far more than its pixels), and the close-ups' neighbourhoods are
 //! found in one pass over the faces that looks up one grid cell per face (a bit mask
@@ -25,6 +25,7 @@ use crate::io::RawMesh;
 use crate::report::{HoleStatus, HoleTrace, RepairReport};
 use glam::DVec3;
 use raster::{Panel, Rgb};
+use rayon::prelude::*;
 
 /// Size and limits of a picture.
 #[derive(Clone, Debug)]
@@ -44,7 +45,7 @@ pub struct Options {
 impl Default for Options {
     fn default() -> Options {
         Options {
-            width: 640,
+            width: 512,
             max_closeups: 8,
             max_overview_faces: 1_000_000,
             max_closeup_faces: 400_000,
@@ -75,8 +76,8 @@ impl Picture {
         })
     }
 
-    /// The image as a PNG file's bytes (fast compression: the picture must cost little
-    /// next to the repair).
+    /// The image as a PNG file's bytes (the fastest compression, rows filtered by
+    /// `Up`: the picture must cost little next to the repair).
     pub fn to_png(&self) -> Result<Vec<u8>, PictureError> {
         let mut out = Vec::with_capacity(self.rgb.len() / 4);
         {
@@ -85,7 +86,7 @@ impl Picture {
             let mut enc = png::Encoder::new(&mut out, w, h);
             enc.set_color(png::ColorType::Rgb);
             enc.set_depth(png::BitDepth::Eight);
-            enc.set_compression(png::Compression::Fast);
+            enc.set_compression(png::Compression::Fastest);
             let mut wr = enc
                 .write_header()
                 .map_err(|e| PictureError(e.to_string()))?;
@@ -135,69 +136,49 @@ pub fn render(mesh: &RawMesh, report: &RepairReport, opts: &Options) -> Picture 
 
     let owners = Owners::new(&holes);
 
-    // the overview
+    // the overview and the close-ups are drawn side by side (rayon::join)
     let stride = faces.len().div_ceil(opts.max_overview_faces.max(1)).max(1);
     let (lo, hi) = bounds(pos, faces, stride);
     let over_h = width * 5 / 8;
-    let mut over = Panel::new(width, over_h, BG);
-    if lo.cmple(hi).all() {
-        let dir = overview_direction(&holes);
-        let cam = Camera::fit(dir, lo, hi, width, over_h, 0.92);
-        let drawn = faces.iter().enumerate().step_by(stride);
-        for (f, &[a, b, c]) in drawn {
-            let color = if f >= first_patch {
-                owners.status(f as u32)
-            } else {
-                None
-            };
-            draw_face(&mut over, &cam, pos, [a, b, c], color.map(patch_color));
-        }
-        let bias = (cam.extent * 0.004) as f32;
-        for h in &holes {
-            outline(
-                &mut over,
-                &cam,
-                pos,
-                &h.boundary,
-                status_color(h.status),
-                3,
-                bias,
-                0.45,
-            );
-        }
-        if holes.len() <= 60 {
-            for h in &holes {
-                let [x, y, _] = cam.project(h.center);
-                label(
-                    &mut over,
-                    x,
-                    y,
-                    &format!("#{}", h.id),
-                    status_color(h.status),
-                );
-            }
-        }
-    }
-
-    // the close-ups
     let chosen = choose_closeups(&holes, opts.max_closeups);
-    let hood = neighbourhoods(
-        mesh,
-        &holes,
-        &chosen,
-        opts.max_closeup_faces,
-        (lo, hi),
-        first_patch,
-    );
     let tile = width / 4;
+    let (over, tiles) = rayon::join(
+        || {
+            overview(
+                mesh,
+                &holes,
+                &owners,
+                first_patch,
+                stride,
+                (lo, hi),
+                width,
+                over_h,
+            )
+        },
+        || {
+            let hood = neighbourhoods(
+                mesh,
+                &holes,
+                &chosen,
+                opts.max_closeup_faces,
+                (lo, hi),
+                first_patch,
+            );
+            chosen
+                .par_iter()
+                .zip(hood.par_iter())
+                .map(|(&i, near)| closeup(mesh, &owners, &holes[i], near, tile))
+                .collect::<Vec<_>>()
+        },
+    );
+
     let rows = chosen.len().div_ceil(2);
     let height = HEADER + over_h + rows * (TILE_BAND + tile);
-    let mut pic = Panel::new(width, height, BAND);
+    let mut pic = Panel::flat(width, height, BAND);
     header(&mut pic, report, holes.len());
     pic.blit(&over, 0, HEADER);
-    for (k, (&hi_, near)) in chosen.iter().zip(&hood).enumerate() {
-        let h = &holes[hi_];
-        let (before, after) = closeup(mesh, &owners, h, near, tile);
+    for (k, (&i, (before, after))) in chosen.iter().zip(&tiles).enumerate() {
+        let h = &holes[i];
         let x = (k % 2) * 2 * tile;
         let y = HEADER + over_h + (k / 2) * (TILE_BAND + tile);
         let c = status_color(h.status);
@@ -217,8 +198,8 @@ pub fn render(mesh: &RawMesh, report: &RepairReport, opts: &Options) -> Picture 
             c,
             1,
         );
-        pic.blit(&before, x, y + TILE_BAND);
-        pic.blit(&after, x + tile, y + TILE_BAND);
+        pic.blit(before, x, y + TILE_BAND);
+        pic.blit(after, x + tile, y + TILE_BAND);
         // a thin separator between the pair's tiles
         pic.rect(x + tile, y + TILE_BAND, 1, tile, BAND);
     }
@@ -227,6 +208,80 @@ pub fn render(mesh: &RawMesh, report: &RepairReport, opts: &Options) -> Picture 
         height,
         rgb: pic.rgb,
     }
+}
+
+/// The overview panel: the model (every `stride`-th face) looking at the holes, each
+/// hole outlined in its status colour and numbered.
+#[allow(clippy::too_many_arguments)]
+fn overview(
+    mesh: &RawMesh,
+    holes: &[HoleView],
+    owners: &Owners,
+    first_patch: usize,
+    stride: usize,
+    (lo, hi): (DVec3, DVec3),
+    width: usize,
+    over_h: usize,
+) -> Panel {
+    let (pos, faces) = (&mesh.positions, &mesh.faces);
+    let mut over = Panel::new(width, over_h, BG);
+    if !lo.cmple(hi).all() {
+        return over;
+    }
+    let dir = overview_direction(holes);
+    let cam = Camera::fit(dir, lo, hi, width, over_h, 0.92);
+    // every vertex projected once when every face is drawn (a face's corners are then
+    // three loads); when only every k-th face is, per face, to keep memory bounded
+    let screen: Vec<[f32; 3]> = if stride == 1 {
+        pos.iter().map(|&p| cam.project(p)).collect()
+    } else {
+        Vec::new()
+    };
+    for (f, &face) in faces.iter().enumerate().step_by(stride) {
+        let color = if f >= first_patch {
+            owners.status(f as u32).map(patch_color)
+        } else {
+            None
+        };
+        if stride == 1 {
+            let (Some(&a), Some(&b), Some(&c)) = (
+                screen.get(face[0] as usize),
+                screen.get(face[1] as usize),
+                screen.get(face[2] as usize),
+            ) else {
+                continue;
+            };
+            over.triangle([a, b, c], shade_projected(&cam, [a, b, c], color));
+        } else if let Some(world) = corners(pos, face) {
+            over.triangle(world.map(|p| cam.project(p)), shade(&cam, world, color));
+        }
+    }
+    let bias = (cam.extent * 0.004) as f32;
+    for h in holes {
+        outline(
+            &mut over,
+            &cam,
+            pos,
+            &h.boundary,
+            status_color(h.status),
+            3,
+            bias,
+            0.45,
+        );
+    }
+    if holes.len() <= 60 {
+        for h in holes {
+            let [x, y, _] = cam.project(h.center);
+            label(
+                &mut over,
+                x,
+                y,
+                &format!("#{}", h.id),
+                status_color(h.status),
+            );
+        }
+    }
+    over
 }
 
 /// What the picture knows of one hole.
@@ -375,6 +430,11 @@ struct Camera {
     cy: f64,
     /// The radius of the scene it frames (world units).
     extent: f64,
+    /// The light's direction (towards the light): from the viewer, a little from the
+    /// upper left.
+    light: DVec3,
+    /// The same in the camera's (right, up, forward) coordinates.
+    light_cam: glam::Vec3,
 }
 
 impl Camera {
@@ -402,6 +462,8 @@ impl Camera {
             cx: w as f64 / 2.0,
             cy: h as f64 / 2.0,
             extent: radius,
+            light: (-fwd + up * 0.45 - right * 0.3).normalize(),
+            light_cam: glam::Vec3::new(-0.3, 0.45, -1.0).normalize(),
         }
     }
 
@@ -436,24 +498,21 @@ impl Camera {
             q.dot(self.fwd) as f32,
         ]
     }
-
-    /// The light's direction (towards the light): from the viewer, a little from the
-    /// upper left.
-    fn light(&self) -> DVec3 {
-        (-self.fwd + self.up * 0.45 - self.right * 0.3).normalize()
-    }
 }
 
-/// Draws one face, flat-shaded: `patch` is its colour when it belongs to a patch.
+/// The corners of a face (`None` when an index is out of range).
 #[inline]
-fn draw_face(panel: &mut Panel, cam: &Camera, pos: &[DVec3], f: [u32; 3], patch: Option<[f32; 3]>) {
-    let (Some(&a), Some(&b), Some(&c)) = (
-        pos.get(f[0] as usize),
-        pos.get(f[1] as usize),
-        pos.get(f[2] as usize),
-    ) else {
-        return;
-    };
+fn corners(pos: &[DVec3], f: [u32; 3]) -> Option<[DVec3; 3]> {
+    Some([
+        *pos.get(f[0] as usize)?,
+        *pos.get(f[1] as usize)?,
+        *pos.get(f[2] as usize)?,
+    ])
+}
+
+/// The flat-shaded colour of a face: `patch` is its colour when it belongs to a patch.
+#[inline]
+fn shade(cam: &Camera, [a, b, c]: [DVec3; 3], patch: Option<[f32; 3]>) -> Rgb {
     let n = (b - a).cross(c - a).normalize_or_zero();
     let facing = -n.dot(cam.fwd);
     let base = match patch {
@@ -461,10 +520,40 @@ fn draw_face(panel: &mut Panel, cam: &Camera, pos: &[DVec3], f: [u32; 3], patch:
         None if facing >= 0.0 => FRONT,
         None => BACK,
     };
-    let lit = n.dot(cam.light()).abs() as f32;
+    let lit = n.dot(cam.light).abs() as f32;
     let k = 0.28 + 0.72 * lit;
-    let color = base.map(|x| (x * k).min(255.0) as u8);
-    panel.triangle([cam.project(a), cam.project(b), cam.project(c)], color);
+    base.map(|x| (x * k).min(255.0) as u8)
+}
+
+/// [`shade`] from a face's projected corners: the camera frame's coordinates are
+/// `((x - cx) / scale, (cy - y) / scale, depth)`, and as (right, up, forward) is a
+/// left-handed frame, the world normal is minus the cross product of those
+/// coordinates' edges. In f32: for the overview's faces, at most a few pixels wide.
+#[inline]
+fn shade_projected(cam: &Camera, [a, b, c]: [[f32; 3]; 3], patch: Option<[f32; 3]>) -> Rgb {
+    let inv = (1.0 / cam.scale) as f32;
+    let e1 = glam::Vec3::new((b[0] - a[0]) * inv, (a[1] - b[1]) * inv, b[2] - a[2]);
+    let e2 = glam::Vec3::new((c[0] - a[0]) * inv, (a[1] - c[1]) * inv, c[2] - a[2]);
+    // the world normal in camera coordinates
+    let n = -e1.cross(e2).normalize_or_zero();
+    let facing = -n.z;
+    let base = match patch {
+        Some(p) => p,
+        None if facing >= 0.0 => FRONT,
+        None => BACK,
+    };
+    let lit = n.dot(cam.light_cam).abs();
+    let k = 0.28 + 0.72 * lit;
+    base.map(|x| (x * k).min(255.0) as u8)
+}
+
+/// Draws one face, flat-shaded: `patch` is its colour when it belongs to a patch.
+#[inline]
+fn draw_face(panel: &mut Panel, cam: &Camera, pos: &[DVec3], f: [u32; 3], patch: Option<[f32; 3]>) {
+    let Some(world) = corners(pos, f) else {
+        return;
+    };
+    panel.triangle(world.map(|p| cam.project(p)), shade(cam, world, patch));
 }
 
 /// Draws a boundary loop.
@@ -664,7 +753,7 @@ fn closeup(
     if dir == DVec3::ZERO {
         let mut sum = DVec3::ZERO;
         for &f in &near.surface {
-            if let Some([a, b, c]) = tri(pos, faces, f) {
+            if let Some([a, b, c]) = faces.get(f as usize).and_then(|&f| corners(pos, f)) {
                 sum += (b - a).cross(c - a);
             }
         }
@@ -715,15 +804,6 @@ fn closeup(
     outline(&mut before, &cam, pos, &h.boundary, color, 2, bias, 0.35);
     outline(&mut after, &cam, pos, &h.boundary, color, 2, bias, 0.35);
     (before, after)
-}
-
-fn tri(pos: &[DVec3], faces: &[[u32; 3]], f: u32) -> Option<[DVec3; 3]> {
-    let face = faces.get(f as usize)?;
-    Some([
-        *pos.get(face[0] as usize)?,
-        *pos.get(face[1] as usize)?,
-        *pos.get(face[2] as usize)?,
-    ])
 }
 
 #[cfg(test)]

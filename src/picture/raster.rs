@@ -20,15 +20,22 @@ pub(crate) struct Panel {
 impl Panel {
     /// A panel filled with `bg`, every depth at infinity.
     pub fn new(w: usize, h: usize, bg: Rgb) -> Panel {
-        let mut rgb = Vec::with_capacity(w * h * 3);
-        for _ in 0..w * h {
-            rgb.extend_from_slice(&bg);
-        }
         Panel {
             w,
             h,
-            rgb,
+            rgb: bg.repeat(w * h),
             z: vec![f32::INFINITY; w * h],
+        }
+    }
+
+    /// A panel filled with `bg` without a depth buffer, for rectangles, text and
+    /// copies only: a triangle or line drawn on it draws nothing.
+    pub fn flat(w: usize, h: usize, bg: Rgb) -> Panel {
+        Panel {
+            w,
+            h,
+            rgb: bg.repeat(w * h),
+            z: Vec::new(),
         }
     }
 
@@ -48,6 +55,9 @@ impl Panel {
     /// Fills a triangle of screen points `(x, y, depth)` with one colour where it is
     /// nearer than what is drawn.
     pub fn triangle(&mut self, v: [[f32; 3]; 3], c: Rgb) {
+        if self.z.len() != self.w * self.h {
+            return; // a flat panel
+        }
         let [[x0, y0, z0], [x1, y1, z1], [x2, y2, z2]] = v;
         let area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0);
         if !area.is_finite() || area.abs() <= 1e-12 {
@@ -62,10 +72,10 @@ impl Panel {
             return;
         }
         // pixels whose centre may be inside
-        let px0 = (min_x - 0.5).ceil().max(0.0) as usize;
-        let px1 = (max_x - 0.5).floor() as usize;
-        let py0 = (min_y - 0.5).ceil().max(0.0) as usize;
-        let py1 = (max_y - 0.5).floor() as usize;
+        let px0 = ceil_index(min_x - 0.5);
+        let px1 = floor_index(max_x - 0.5);
+        let py0 = ceil_index(min_y - 0.5);
+        let py1 = floor_index(max_y - 0.5);
         if px0 > px1 || py0 > py1 {
             return;
         }
@@ -75,16 +85,53 @@ impl Panel {
         let (a1, b1) = ((y2 - y0) * inv, (x0 - x2) * inv);
         let c0 = (x1 * y2 - x2 * y1) * inv;
         let c1 = (x2 * y0 - x0 * y2) * inv;
+        let px1 = px1.min(self.w - 1);
+        // depth as an affine function of the pixel centre:
+        // z = l0 z0 + l1 z1 + l2 z2 = z2 + l0 (z0 - z2) + l1 (z1 - z2)
+        let (dz0, dz1) = (z0 - z2, z1 - z2);
+        let zx = a0 * dz0 + a1 * dz1;
+        let zy = b0 * dz0 + b1 * dz1;
+        let zc = z2 + c0 * dz0 + c1 * dz1;
+        // l2 = 1 - l0 - l1, as an affine function of x on a row; the weights' zeros
+        // on a row are at -r / a (a weight nearly constant along the row: none).
+        // Only a triangle a few pixels wide or more looks for its span on each row.
+        let a2 = -(a0 + a1);
+        let spans = px1 - px0 >= 4;
+        let inv_a = [a0, a1, a2].map(|a| if a.abs() > 1e-6 { 1.0 / a } else { 0.0 });
         for py in py0..=py1.min(self.h - 1) {
             let y = py as f32 + 0.5;
+            let r0 = b0 * y + c0;
+            let r1 = b1 * y + c1;
+            let (mut sx0, mut sx1) = (px0, px1);
+            if spans {
+                // the pixels of this row whose centre can be inside: where each
+                // weight a * x + r >= 0, widened by a pixel (the test below decides
+                // every pixel exactly)
+                let r2 = 1.0 - r0 - r1;
+                let (mut lo, mut hi) = (px0 as f32 + 0.5, px1 as f32 + 0.5);
+                for (ia, r) in [(inv_a[0], r0), (inv_a[1], r1), (inv_a[2], r2)] {
+                    if ia > 0.0 {
+                        lo = lo.max(-r * ia - 1.0);
+                    } else if ia < 0.0 {
+                        hi = hi.min(-r * ia + 1.0);
+                    }
+                }
+                if !(lo <= hi) {
+                    continue;
+                }
+                // lo >= px0 + 0.5 >= 0.5: truncation is floor
+                sx0 = ((lo - 0.5) as usize).max(px0);
+                sx1 = (floor_index(hi - 0.5) + 1).min(px1);
+            }
+            let zr = zc + zy * y;
             let row = py * self.w;
-            for px in px0..=px1.min(self.w - 1) {
+            for px in sx0..=sx1 {
                 let x = px as f32 + 0.5;
-                let l0 = a0 * x + b0 * y + c0;
-                let l1 = a1 * x + b1 * y + c1;
+                let l0 = a0 * x + r0;
+                let l1 = a1 * x + r1;
                 let l2 = 1.0 - l0 - l1;
                 if l0 >= 0.0 && l1 >= 0.0 && l2 >= 0.0 {
-                    let z = l0 * z0 + l1 * z1 + l2 * z2;
+                    let z = zr + zx * x;
                     let i = row + px;
                     if z < self.z[i] {
                         self.z[i] = z;
@@ -99,6 +146,9 @@ impl Panel {
     /// `bias` nearer than it is; where the surface hides it, blended at `hidden`
     /// opacity (0: not at all). Lines do not write depth.
     pub fn line(&mut self, a: [f32; 3], b: [f32; 3], c: Rgb, width: usize, bias: f32, hidden: f32) {
+        if self.z.len() != self.w * self.h {
+            return; // a flat panel
+        }
         let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
         let len = dx.abs().max(dy.abs());
         if !len.is_finite() {
@@ -112,7 +162,7 @@ impl Panel {
             let x = a[0] + dx * t;
             let y = a[1] + dy * t;
             let z = a[2] + (b[2] - a[2]) * t - bias;
-            let (cx, cy) = (x.floor() as i64, y.floor() as i64);
+            let (cx, cy) = (floor_i64(x), floor_i64(y));
             for oy in -r0..=r1 {
                 for ox in -r0..=r1 {
                     let (px, py) = (cx + ox, cy + oy);
@@ -175,6 +225,30 @@ impl Panel {
         let i = 3 * (y * self.w + x);
         [self.rgb[i], self.rgb[i + 1], self.rgb[i + 2]]
     }
+}
+
+/// The smallest index `i >= 0` with `i as f32 >= v` (0 for NaN).
+#[inline]
+fn ceil_index(v: f32) -> usize {
+    if !(v > 0.0) {
+        return 0;
+    }
+    let t = v as usize; // truncation (saturating)
+    t + usize::from((t as f32) < v)
+}
+
+/// The largest index `i` with `i as f32 <= v`, 0 when there is none (or NaN).
+#[inline]
+fn floor_index(v: f32) -> usize {
+    // for v >= 0 truncation is floor; below 0 it saturates to 0
+    v as usize
+}
+
+/// `v.floor() as i64` without a call to libm's floorf (0 for NaN).
+#[inline]
+fn floor_i64(v: f32) -> i64 {
+    let t = v as i64;
+    t - i64::from((t as f32) > v)
 }
 
 #[cfg(test)]
@@ -255,6 +329,37 @@ mod tests {
         assert_eq!(p.at(10, 5), [200, 0, 0]);
         p.line([2.0, 9.5, 3.0], [18.0, 9.5, 3.0], [200, 0, 0], 1, 0.0, 0.5);
         assert_eq!(p.at(5, 9), [150, 50, 50]);
+    }
+
+    #[test]
+    fn a_flat_panel_takes_text_and_copies_but_no_triangles() {
+        let mut p = Panel::flat(12, 12, BG);
+        p.triangle(
+            [[0.0, 0.0, 1.0], [12.0, 0.0, 1.0], [0.0, 12.0, 1.0]],
+            [255, 0, 0],
+        );
+        p.line([0.0, 6.5, 0.0], [12.0, 6.5, 0.0], [255, 0, 0], 1, 0.0, 1.0);
+        assert!(p.rgb.iter().all(|&b| b == 0));
+        p.text(0, 0, "#1", [255, 255, 255], 1);
+        assert!(p.rgb.contains(&255));
+        assert_eq!(
+            Panel::flat(3, 2, [1, 2, 3]).rgb,
+            Panel::new(3, 2, [1, 2, 3]).rgb
+        );
+    }
+
+    #[test]
+    fn index_rounding_matches_ceil_and_floor() {
+        for v in [0.0f32, 0.25, 0.5, 1.0, 1.5, 2.0, 7.999, 8.0, 1e6] {
+            assert_eq!(ceil_index(v), v.ceil() as usize, "{v}");
+            assert_eq!(floor_index(v), v.floor() as usize, "{v}");
+        }
+        assert_eq!((ceil_index(-0.5), floor_index(-0.5)), (0, 0));
+        assert_eq!((ceil_index(f32::NAN), floor_index(f32::NAN)), (0, 0));
+        for v in [-2.5f32, -1.0, -0.25, 0.0, 0.75, 3.0, 1e9, -1e9] {
+            assert_eq!(floor_i64(v), v.floor() as i64, "{v}");
+        }
+        assert_eq!(floor_i64(f32::NAN), 0);
     }
 
     #[test]

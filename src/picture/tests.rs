@@ -66,9 +66,9 @@ fn a_filled_hole_is_outlined_green_and_its_patch_shows_only_after() {
     );
 
     let pic = render(&out, &report, &Options::default());
-    assert_eq!(pic.width, 640);
-    let over_h = 640 * 5 / 8;
-    let tile = 160;
+    assert_eq!(pic.width, 512);
+    let over_h = 512 * 5 / 8;
+    let tile = 512 / 4;
     assert_eq!(
         pic.height,
         HEADER + over_h + TILE_BAND + tile,
