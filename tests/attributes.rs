@@ -738,3 +738,203 @@ fn a_gltf_without_holes_is_written_back_byte_for_byte() {
         );
     }
 }
+
+/// The holed 20 x 20 grid as OBJ with colours written 0..255: red and green linear in
+/// x and y (integers at the grid's vertices), blue constant.
+fn byte_colour_grid_obj(s: &Soup) -> String {
+    let mut t = String::new();
+    for p in &s.v {
+        let (r, g) = (40.0 + 8.0 * p[0], 30.0 + 9.0 * p[1]);
+        writeln!(t, "v {} {} {} {r} {g} 200", p[0], p[1], p[2]).unwrap();
+    }
+    for f in &s.f {
+        writeln!(t, "f {} {} {}", f[0] + 1, f[1] + 1, f[2] + 1).unwrap();
+    }
+    t
+}
+
+#[test]
+fn obj_byte_colours_come_back_as_written_and_new_vertices_in_the_same_scale() {
+    let dir = tempdir();
+    let vlines = |t: &str| -> Vec<String> {
+        t.lines()
+            .filter(|l| l.starts_with("v "))
+            .map(str::to_string)
+            .collect()
+    };
+    // no hole: every vertex line comes back as written
+    let whole = byte_colour_grid_obj(&grid_soup(6));
+    std::fs::write(dir.path().join("whole.obj"), &whole).unwrap();
+    let raw = io::read(&dir.path().join("whole.obj"), None).unwrap();
+    let (out, report) = repair(&raw);
+    assert_eq!(report.summary.filled, 0, "{:?}", report.summary); // the border is no hole
+    assert_eq!(out.positions.len(), raw.positions.len());
+    same_attrs(&raw, &out);
+    io::write(&dir.path().join("whole.out.obj"), &out, None).unwrap();
+    let text = std::fs::read_to_string(dir.path().join("whole.out.obj")).unwrap();
+    assert_eq!(vlines(&text), vlines(&whole));
+
+    // a hole: input vertices' lines unchanged, new vertices' colours 0..255, linear
+    let (s, _) = cut(&grid_soup(20), [10.0, 10.0, 0.0], 4.0);
+    let holed = byte_colour_grid_obj(&s);
+    let src = dir.path().join("holed.obj");
+    std::fs::write(&src, &holed).unwrap();
+    let raw = io::read(&src, None).unwrap();
+    let (out, report) = repair(&raw);
+    assert!(report.summary.filled >= 1);
+    let nv = raw.positions.len();
+    assert!(out.positions.len() > nv);
+    let dst = dir.path().join("out.obj");
+    io::write(&dst, &out, None).unwrap();
+    let text = std::fs::read_to_string(&dst).unwrap();
+    let (a, b) = (vlines(&holed), vlines(&text));
+    assert_eq!(b.len(), out.positions.len());
+    assert_eq!(a[..], b[..nv]);
+    for (v, line) in b.iter().enumerate().skip(nv) {
+        let t: Vec<f64> = line
+            .split_whitespace()
+            .skip(1)
+            .map(|x| x.parse().unwrap())
+            .collect();
+        assert_eq!(t.len(), 6, "{line}");
+        let p = out.positions[v];
+        assert!((t[3] - (40.0 + 8.0 * p.x)).abs() <= 0.5 + 1e-6, "{line}");
+        assert!((t[4] - (30.0 + 9.0 * p.y)).abs() <= 0.5 + 1e-6, "{line}");
+        assert_eq!(t[5], 200.0, "{line}");
+    }
+    // read back: the same values; the same 0..1 colours (new vertices': rounded to
+    // the byte the file holds)
+    let back = io::read(&dst, None).unwrap();
+    assert_eq!(back.attrs, out.attrs);
+    let (bc, oc) = (back.colors.unwrap(), out.colors.unwrap());
+    assert_eq!(bc[..nv], oc[..nv]);
+    for v in nv..oc.len() {
+        for k in 0..3 {
+            assert!((bc[v][k] - oc[v][k]).abs() <= 0.5 / 255.0 + 1e-6, "{v}");
+        }
+    }
+    assert!(report
+        .attributes
+        .interpolated
+        .iter()
+        .any(|s| s.starts_with("vertex red")));
+}
+
+/// OFF text of a soup with a colour `r g b a` on every face (the writer's layout).
+fn face_coloured_off(s: &Soup, colour: impl Fn(usize, &[usize; 3]) -> [u8; 4]) -> String {
+    let mut t = format!("OFF\n{} {} 0\n", s.v.len(), s.f.len());
+    for p in &s.v {
+        writeln!(t, "{} {} {}", p[0], p[1], p[2]).unwrap();
+    }
+    for (k, f) in s.f.iter().enumerate() {
+        let c = colour(k, f);
+        writeln!(
+            t,
+            "3 {} {} {} {} {} {} {}",
+            f[0], f[1], f[2], c[0], c[1], c[2], c[3]
+        )
+        .unwrap();
+    }
+    t
+}
+
+/// Each face's `red green blue alpha` values.
+fn face_colours(raw: &RawMesh) -> Vec<[f64; 4]> {
+    let col = |name: &str| match raw.attrs.face.iter().find(|p| p.name == name) {
+        Some(p) => match &p.data {
+            PropData::Scalar(v) => v.clone(),
+            _ => panic!("{name} is a list"),
+        },
+        None => panic!("no face property {name}"),
+    };
+    let c = ["red", "green", "blue", "alpha"].map(col);
+    (0..raw.faces.len())
+        .map(|j| [0, 1, 2, 3].map(|k| c[k].get(j).unwrap()))
+        .collect()
+}
+
+#[test]
+fn off_face_colours_are_kept_and_new_faces_take_the_colour_around_the_hole() {
+    let dir = tempdir();
+    // no hole: the file comes back identical
+    let g = grid_soup(4);
+    let whole = face_coloured_off(&g, |k, _| [(k * 37 % 256) as u8, 200, (k * 3) as u8, 255]);
+    std::fs::write(dir.path().join("whole.off"), &whole).unwrap();
+    let raw = io::read(&dir.path().join("whole.off"), None).unwrap();
+    assert_eq!(raw.attrs.face.len(), 4);
+    let (out, report) = repair(&raw);
+    assert_eq!(report.summary.filled, 0, "{:?}", report.summary);
+    io::write(&dir.path().join("whole.out.off"), &out, None).unwrap();
+    let text = std::fs::read_to_string(dir.path().join("whole.out.off")).unwrap();
+    assert_eq!(text, whole);
+
+    // a hole: input faces keep theirs; the faces around the hole are one colour,
+    // which every new face takes (all four channels from one face)
+    let s0 = icosphere(3);
+    let centre = [0.0, 0.0, 1.0];
+    let (s, _) = cut(&s0, centre, 0.3);
+    let near = |f: &[usize; 3]| {
+        let c = [0, 1, 2].map(|k| f.iter().map(|&i| s.v[i][k]).sum::<f64>() / 3.0);
+        (0..3)
+            .map(|k| (c[k] - centre[k]).powi(2))
+            .sum::<f64>()
+            .sqrt()
+            < 0.6
+    };
+    let text = face_coloured_off(&s, |k, f| {
+        if near(f) {
+            [10, 20, 30, 255]
+        } else {
+            [
+                (k % 256) as u8,
+                (k * 7 % 256) as u8,
+                255 - (k % 256) as u8,
+                128,
+            ]
+        }
+    });
+    let src = dir.path().join("holed.off");
+    std::fs::write(&src, text).unwrap();
+    let raw = io::read(&src, None).unwrap();
+    let (out, report) = repair(&raw);
+    assert_eq!(report.summary.filled, 1);
+    let key = |f: [u32; 3]| {
+        let mut k = f;
+        k.sort_unstable();
+        k
+    };
+    let input: std::collections::HashMap<[u32; 3], usize> = raw
+        .faces
+        .iter()
+        .enumerate()
+        .map(|(j, &f)| (key(f), j))
+        .collect();
+    let (a, b) = (face_colours(&raw), face_colours(&out));
+    let mut new = 0;
+    for (f, c) in out.faces.iter().zip(&b) {
+        let in_face = (f.iter().all(|&v| (v as usize) < raw.positions.len()))
+            .then(|| input.get(&key(*f)))
+            .flatten();
+        match in_face {
+            Some(&j) => assert_eq!(c.map(f64::to_bits), a[j].map(f64::to_bits)),
+            None => {
+                new += 1;
+                assert_eq!(*c, [10.0, 20.0, 30.0, 255.0]);
+            }
+        }
+    }
+    assert!(new > 0);
+    assert!(
+        report
+            .attributes
+            .interpolated
+            .iter()
+            .any(|s| s == "face red: the most common colour of the faces around the hole"),
+        "{:?}",
+        report.attributes
+    );
+    assert!(report.attributes.read.iter().any(|s| s == "face red (u8)"));
+    // written and read back: the same values
+    let back = write_read(&out, dir.path(), "out.off");
+    assert_eq!(back.attrs, out.attrs);
+}
