@@ -341,8 +341,9 @@ pub struct GltfPrim {
 pub struct GltfExtras {
     /// The JSON document as read.
     pub json: serde_json::Value,
-    /// Every buffer's bytes, by buffer index.
-    pub buffers: Vec<Vec<u8>>,
+    /// Every buffer's bytes, by buffer index (shared: the repaired mesh's extras and
+    /// the input's hold one copy).
+    pub buffers: std::sync::Arc<[Vec<u8>]>,
     /// The buffer that is the GLB binary chunk, when read from a `.glb`.
     pub glb_bin: Option<usize>,
     /// The mesh whose triangles were read.

@@ -60,7 +60,7 @@ pub(super) fn read(path: &Path, bytes: &[u8], caps: &Caps) -> Result<RawMesh, Io
     }
     let parsed = std::panic::catch_unwind(|| ::gltf::Gltf::from_slice(bytes))
         .map_err(|_| bad("the glTF document could not be parsed".into()))?;
-    let doc = parsed.map_err(|e| bad(format!("not a valid glTF 2.0 document: {e}")))?;
+    let mut doc = parsed.map_err(|e| bad(format!("not a valid glTF 2.0 document: {e}")))?;
     // the JSON as written, kept for the writer
     let json: Value = if is_glb {
         let glb = ::gltf::binary::Glb::from_slice(bytes).map_err(|e| bad(format!("GLB: {e}")))?;
@@ -70,12 +70,18 @@ pub(super) fn read(path: &Path, bytes: &[u8], caps: &Caps) -> Result<RawMesh, Io
     };
     // every buffer's bytes
     let mut buffers: Vec<Vec<u8>> = Vec::new();
-    let mut glb_bin = None;
+    let mut glb_bin: Option<usize> = None;
+    let mut blob = doc.blob.take();
     for b in doc.buffers() {
         let data = match b.source() {
             ::gltf::buffer::Source::Bin => {
-                glb_bin = Some(b.index());
-                doc.blob.clone().ok_or_else(|| {
+                // the chunk moved into its buffer (a second buffer naming it: a copy)
+                let chunk = match glb_bin.and_then(|k| buffers.get(k)) {
+                    Some(first) => Some(first.clone()),
+                    None => blob.take(),
+                };
+                glb_bin = glb_bin.or(Some(b.index()));
+                chunk.ok_or_else(|| {
                     bad(format!(
                         "buffer {} names a GLB binary chunk the file does not have",
                         b.index()
@@ -269,7 +275,7 @@ pub(super) fn read(path: &Path, bytes: &[u8], caps: &Caps) -> Result<RawMesh, Io
     }
     raw.attrs.gltf = Some(GltfExtras {
         json,
-        buffers,
+        buffers: buffers.into(),
         glb_bin,
         mesh: mesh.index(),
         prims,
@@ -425,32 +431,45 @@ fn array<'a>(doc: &'a mut Value, key: &str) -> &'a mut Vec<Value> {
 /// Writes `raw` as glTF (`glb`: binary) to `w`.
 pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result<()> {
     // a mesh written as it was read (no repair in between) keeps every triangle
-    let identity: Option<GltfExtras> = raw.attrs.gltf.as_ref().and_then(|g| {
-        (g.out_faces.is_empty() && g.corners.len() == raw.faces.len()).then(|| GltfExtras {
-            out_faces: (0..raw.faces.len() as u32).map(Some).collect(),
-            out_prim: (0..raw.faces.len())
-                .map(|j| g.prim_of(j).unwrap_or(0))
-                .collect(),
-            ..g.clone()
+    let read = raw.attrs.gltf.as_ref();
+    let identity: Option<(Vec<Option<u32>>, Vec<u32>)> = read.and_then(|g| {
+        (g.out_faces.is_empty() && g.corners.len() == raw.faces.len()).then(|| {
+            (
+                (0..raw.faces.len() as u32).map(Some).collect(),
+                (0..raw.faces.len())
+                    .map(|j| g.prim_of(j).unwrap_or(0))
+                    .collect(),
+            )
         })
     });
-    let (mut doc, mut buffers, glb_bin, mesh_index, prims, kept_faces) = match identity
-        .as_ref()
-        .or(raw.attrs.gltf.as_ref())
-    {
-        Some(g) if g.out_faces.len() == raw.faces.len() => {
+    let (out_faces, out_prim): (&[Option<u32>], &[u32]) = match (&identity, read) {
+        (Some((f, p)), _) => (f, p),
+        (None, Some(g)) => (&g.out_faces, &g.out_prim),
+        (None, None) => (&[], &[]),
+    };
+    // the buffers as read are borrowed, never copied
+    type Read<'a> = (
+        Value,
+        &'a [Vec<u8>],
+        Option<usize>,
+        usize,
+        &'a [GltfPrim],
+        Option<(&'a GltfExtras, Vec<bool>)>,
+    );
+    let (mut doc, read_buffers, glb_bin, mesh_index, prims, kept_faces): Read<'_> = match read {
+        Some(g) if out_faces.len() == raw.faces.len() => {
             let mut kept = vec![false; g.corners.len()];
-            for &j in g.out_faces.iter().flatten() {
+            for &j in out_faces.iter().flatten() {
                 if let Some(k) = kept.get_mut(j as usize) {
                     *k = true;
                 }
             }
             (
                 g.json.clone(),
-                g.buffers.clone(),
+                &g.buffers,
                 g.glb_bin,
                 g.mesh,
-                g.prims.clone(),
+                &g.prims,
                 Some((g, kept)),
             )
         }
@@ -462,10 +481,10 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
                 "nodes": [{"mesh": 0}],
                 "meshes": [{"primitives": []}],
             }),
-            Vec::new(),
+            &[],
             None,
             0,
-            Vec::new(),
+            &[],
             None,
         ),
     };
@@ -477,7 +496,7 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
     let mut emptied: Vec<usize> = Vec::new();
     // primitives that lost input faces: a new index accessor
     if let Some((g, kept)) = &kept_faces {
-        for p in &prims {
+        for p in prims {
             let range = p.first_face..p.first_face + p.faces;
             if range.clone().all(|j| kept[j]) {
                 continue;
@@ -507,11 +526,11 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
     let mut groups: Vec<(Option<usize>, Vec<usize>)> = Vec::new();
     for f in 0..raw.faces.len() {
         let target = match &kept_faces {
-            Some((g, _)) => {
-                if g.out_faces.get(f).copied().flatten().is_some() {
+            Some(_) => {
+                if out_faces.get(f).copied().flatten().is_some() {
                     continue;
                 }
-                g.out_prim
+                out_prim
                     .get(f)
                     .map(|&s| s as usize)
                     .filter(|&s| s < prims.len())
@@ -686,16 +705,28 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
             *list = Value::Array(new_prims);
         }
     }
-    // where the new stretch lives
-    let mut bin: Option<Vec<u8>> = None;
-    let new_buffer: Option<usize> = if st.blob.is_empty() {
+    // where the new stretch lives; each buffer's bytes: as read (borrowed), zero
+    // padding, and the new stretch (appended to a GLB's binary chunk)
+    let blob = std::mem::take(&mut st.blob);
+    let mut parts: Vec<Part<'_>> = read_buffers
+        .iter()
+        .map(|b| Part {
+            read: b,
+            pad: 0,
+            new: &[],
+        })
+        .collect();
+    let new_buffer: Option<usize> = if blob.is_empty() {
         None
     } else if glb {
         match glb_bin {
             Some(b) => {
-                let base = buffers[b].len().next_multiple_of(4);
-                buffers[b].resize(base, 0);
-                buffers[b].extend_from_slice(&st.blob);
+                let part = parts
+                    .get_mut(b)
+                    .ok_or_else(|| io::Error::other("the GLB binary chunk names no buffer"))?;
+                let base = part.read.len().next_multiple_of(4);
+                part.pad = base - part.read.len();
+                part.new = &blob;
                 for (_, off) in st.views.iter_mut() {
                     *off += base;
                 }
@@ -709,14 +740,25 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
                     }
                 }
                 array(&mut doc, "buffers").insert(0, json!({"byteLength": 0}));
-                buffers.insert(0, std::mem::take(&mut st.blob));
+                parts.insert(
+                    0,
+                    Part {
+                        read: &blob,
+                        pad: 0,
+                        new: &[],
+                    },
+                );
                 Some(0)
             }
         }
     } else {
         array(&mut doc, "buffers").push(json!({"byteLength": 0}));
-        buffers.push(std::mem::take(&mut st.blob));
-        Some(buffers.len() - 1)
+        parts.push(Part {
+            read: &blob,
+            pad: 0,
+            new: &[],
+        });
+        Some(parts.len() - 1)
     };
     if let Some(nb) = new_buffer {
         let views = array(&mut doc, "bufferViews");
@@ -731,9 +773,10 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
     } else {
         None
     };
+    let mut bin: Option<Part<'_>> = None;
     let bufs = array(&mut doc, "buffers");
     for (i, b) in bufs.iter_mut().enumerate() {
-        let Some(data) = buffers.get(i) else { continue };
+        let Some(&data) = parts.get(i) else { continue };
         let from_file = b
             .get("uri")
             .and_then(Value::as_str)
@@ -746,13 +789,16 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
             if let Some(o) = b.as_object_mut() {
                 o.remove("uri");
             }
-            bin = Some(data.clone());
+            bin = Some(data);
         } else if !from_file {
             // the binary chunk of a .glb written as .gltf, and every new stretch
-            b["uri"] = json!(format!(
-                "data:application/octet-stream;base64,{}",
-                base64::engine::general_purpose::STANDARD.encode(data)
-            ));
+            let engine = &base64::engine::general_purpose::STANDARD;
+            let text = if data.pad == 0 && data.new.is_empty() {
+                engine.encode(data.read)
+            } else {
+                engine.encode(data.to_vec())
+            };
+            b["uri"] = json!(format!("data:application/octet-stream;base64,{text}"));
         }
     }
     let text = serde_json::to_vec(&doc).map_err(io::Error::other)?;
@@ -763,18 +809,13 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
     while jchunk.len() % 4 != 0 {
         jchunk.push(b' ');
     }
-    let mut bchunk = bin.unwrap_or_default();
-    while bchunk.len() % 4 != 0 {
-        bchunk.push(0);
-    }
-    let total = 12
-        + 8
-        + jchunk.len()
-        + if bchunk.is_empty() {
-            0
-        } else {
-            8 + bchunk.len()
-        };
+    let bin = bin.unwrap_or(Part {
+        read: &[],
+        pad: 0,
+        new: &[],
+    });
+    let blen = bin.len().next_multiple_of(4);
+    let total = 12 + 8 + jchunk.len() + if blen == 0 { 0 } else { 8 + blen };
     let total =
         u32::try_from(total).map_err(|_| io::Error::other("a GLB file holds at most 4 GiB"))?;
     w.write_all(b"glTF")?;
@@ -783,12 +824,40 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
     w.write_all(&(jchunk.len() as u32).to_le_bytes())?;
     w.write_all(b"JSON")?;
     w.write_all(&jchunk)?;
-    if !bchunk.is_empty() {
-        w.write_all(&(bchunk.len() as u32).to_le_bytes())?;
+    if blen != 0 {
+        w.write_all(&(blen as u32).to_le_bytes())?;
         w.write_all(b"BIN\0")?;
-        w.write_all(&bchunk)?;
+        bin.write(w)?;
+        w.write_all(&[0u8; 3][..blen - bin.len()])?;
     }
     Ok(())
+}
+
+/// A buffer's bytes as written: the bytes read (borrowed), zero padding, the new
+/// stretch.
+#[derive(Clone, Copy)]
+struct Part<'a> {
+    read: &'a [u8],
+    pad: usize,
+    new: &'a [u8],
+}
+
+impl Part<'_> {
+    fn len(&self) -> usize {
+        self.read.len() + self.pad + self.new.len()
+    }
+    fn write<W: Write>(&self, w: &mut W) -> io::Result<()> {
+        w.write_all(self.read)?;
+        w.write_all(&vec![0u8; self.pad])?;
+        w.write_all(self.new)
+    }
+    fn to_vec(self) -> Vec<u8> {
+        let mut v = Vec::with_capacity(self.len());
+        v.extend_from_slice(self.read);
+        v.resize(self.read.len() + self.pad, 0);
+        v.extend_from_slice(self.new);
+        v
+    }
 }
 
 #[cfg(test)]
@@ -848,7 +917,7 @@ mod tests {
         let mut raw = RawMesh::default();
         raw.attrs.gltf = Some(GltfExtras {
             json: doc,
-            buffers: vec![bin],
+            buffers: vec![bin].into(),
             glb_bin: Some(0),
             mesh: 0,
             prims: Vec::new(),
