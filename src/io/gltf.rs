@@ -25,8 +25,8 @@
 //! written keeps the external names it read (those files travel beside it) and holds
 //! the new stretch as a `data:` URI; a `.glb` holds it in its binary chunk.
 
-use super::attrs::{Corners, GltfExtras, GltfPrim};
-use super::{malformed, Caps, Encoding, IoError, Precision, RawMesh};
+use super::attrs::{percent_decode, Corners, GltfExtras, GltfPrim};
+use super::{malformed, Caps, Encoding, IoError, Precision, RawMesh, Resources};
 use base64::Engine as _;
 use glam::DVec3;
 use serde_json::{json, Value};
@@ -42,7 +42,12 @@ const TRIANGLES: u32 = 4;
 
 /// Reads a `.gltf` or `.glb` held in `bytes` (`path` names it in errors and locates
 /// its external buffers).
-pub(super) fn read(path: &Path, bytes: &[u8], caps: &Caps) -> Result<RawMesh, IoError> {
+pub(super) fn read(
+    path: &Path,
+    bytes: &[u8],
+    caps: &Caps,
+    resources: &Resources,
+) -> Result<RawMesh, IoError> {
     let bad = |m: String| malformed(path, None, m);
     let is_glb = bytes.starts_with(b"glTF");
     if is_glb {
@@ -88,9 +93,8 @@ pub(super) fn read(path: &Path, bytes: &[u8], caps: &Caps) -> Result<RawMesh, Io
                     ))
                 })?
             }
-            ::gltf::buffer::Source::Uri(uri) => {
-                load_uri(path, uri).map_err(|m| bad(format!("buffer {}: {m}", b.index())))?
-            }
+            ::gltf::buffer::Source::Uri(uri) => load_uri(path, uri, resources)
+                .map_err(|m| bad(format!("buffer {}: {m}", b.index())))?,
         };
         if data.len() < b.length() {
             return Err(bad(format!(
@@ -329,7 +333,7 @@ fn check_accessor(a: &::gltf::Accessor, buffers: &[Vec<u8>]) -> Result<(), Strin
 }
 
 /// The bytes a buffer URI names: a `data:` URI, or a file beside `path`.
-fn load_uri(path: &Path, uri: &str) -> Result<Vec<u8>, String> {
+fn load_uri(path: &Path, uri: &str, resources: &Resources) -> Result<Vec<u8>, String> {
     if let Some(rest) = uri.strip_prefix("data:") {
         let (_, payload) = rest
             .split_once(";base64,")
@@ -349,28 +353,8 @@ fn load_uri(path: &Path, uri: &str) -> Result<Vec<u8>, String> {
             "{uri:?}: only a name relative to the file (no absolute path, `..` or URL) is read"
         ));
     }
-    let full = path.parent().unwrap_or(Path::new(".")).join(rel);
+    let full = resources.locate(path, rel)?;
     std::fs::read(&full).map_err(|e| format!("cannot read {}: {e}", full.display()))
-}
-
-/// `%20` and the like in a relative URI.
-fn percent_decode(s: &str) -> String {
-    let b = s.as_bytes();
-    let mut out = Vec::with_capacity(b.len());
-    let mut i = 0;
-    while i < b.len() {
-        let hex = |c: u8| (c as char).to_digit(16);
-        if b[i] == b'%' && i + 2 < b.len() {
-            if let (Some(h), Some(l)) = (hex(b[i + 1]), hex(b[i + 2])) {
-                out.push((h * 16 + l) as u8);
-                i += 3;
-                continue;
-            }
-        }
-        out.push(b[i]);
-        i += 1;
-    }
-    String::from_utf8_lossy(&out).into_owned()
 }
 
 /// The new stretch of buffer being written: views and accessors appended to `doc`.
@@ -988,6 +972,50 @@ mod tests {
         doc["meshes"] = json!([m.clone(), m]);
         let e = read_mem(&serde_json::to_vec(&doc).unwrap(), Format::Gltf).unwrap_err();
         assert!(e.to_string().contains("one mesh"), "{e}");
+    }
+
+    #[test]
+    fn external_buffers_are_read_from_the_files_given_or_beside() {
+        let d = tempfile::tempdir().unwrap();
+        let mut doc: Value = serde_json::from_slice(&square(false)).unwrap();
+        let uri = doc["buffers"][0]["uri"].as_str().unwrap().to_string();
+        let bin = base64::engine::general_purpose::STANDARD
+            .decode(uri.split_once(";base64,").unwrap().1)
+            .unwrap();
+        doc["buffers"][0]["uri"] = json!("./sq%20a.bin");
+        let gltf = d.path().join("sq.gltf");
+        std::fs::write(&gltf, serde_json::to_vec(&doc).unwrap()).unwrap();
+        let read = |res: &Resources| {
+            crate::io::read_with_resources(&gltf, None, &ReadLimits::default(), res)
+        };
+        // beside the file, by the decoded name
+        std::fs::write(d.path().join("sq a.bin"), &bin).unwrap();
+        let beside = read(&Resources::default()).unwrap();
+        assert_eq!(beside.faces.len(), 2);
+        // only the files given: the one beside is not read
+        let e = read(&Resources {
+            files: Vec::new(),
+            only: true,
+        })
+        .unwrap_err();
+        assert!(e.to_string().contains("not among the files given"), "{e}");
+        std::fs::rename(d.path().join("sq a.bin"), d.path().join("claimed.m0")).unwrap();
+        let given = read(&Resources {
+            files: vec![("sq a.bin".into(), d.path().join("claimed.m0"))],
+            only: true,
+        })
+        .unwrap();
+        assert_eq!(given.positions, beside.positions);
+        // `..` and absolute names are refused before any lookup
+        let mut doc2 = doc.clone();
+        doc2["buffers"][0]["uri"] = json!("../claimed.m0");
+        std::fs::write(&gltf, serde_json::to_vec(&doc2).unwrap()).unwrap();
+        let e = read(&Resources {
+            files: vec![("claimed.m0".into(), d.path().join("claimed.m0"))],
+            only: false,
+        })
+        .unwrap_err();
+        assert!(e.to_string().contains("relative"), "{e}");
     }
 
     #[test]
