@@ -938,3 +938,110 @@ fn off_face_colours_are_kept_and_new_faces_take_the_colour_around_the_hole() {
     let back = write_read(&out, dir.path(), "out.off");
     assert_eq!(back.attrs, out.attrs);
 }
+
+/// The holed 20 x 20 grid as a `.gltf` of two meshes (the faces left and right of
+/// x = 10, each with its own material and index accessor, one POSITION accessor shared),
+/// each placed by a node of its own (the second with `translation`).
+fn two_mesh_grid_gltf(s: &Soup, translation: [f64; 3]) -> Vec<u8> {
+    use base64::Engine as _;
+    use serde_json::json;
+    let mut bin: Vec<u8> = Vec::new();
+    for p in &s.v {
+        for x in p {
+            bin.extend_from_slice(&(*x as f32).to_le_bytes());
+        }
+    }
+    let mut views = vec![json!({"buffer": 0, "byteOffset": 0, "byteLength": bin.len()})];
+    let mut accessors = vec![json!({"bufferView": 0, "componentType": 5126,
+        "count": s.v.len(), "type": "VEC3", "min": [0, 0, 0], "max": [20, 20, 0]})];
+    let centre_x = |f: &[usize; 3]| f.iter().map(|&i| s.v[i][0]).sum::<f64>() / 3.0;
+    for left in [true, false] {
+        let off = bin.len();
+        let mut n = 0;
+        for f in s.f.iter().filter(|f| (centre_x(f) < 10.0) == left) {
+            for &i in f {
+                bin.extend_from_slice(&(i as u32).to_le_bytes());
+                n += 1;
+            }
+        }
+        views.push(json!({"buffer": 0, "byteOffset": off, "byteLength": bin.len() - off}));
+        accessors.push(json!({"bufferView": views.len() - 1, "componentType": 5125,
+            "count": n, "type": "SCALAR"}));
+    }
+    let doc = json!({
+        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0, 1]}],
+        "nodes": [{"mesh": 0}, {"mesh": 1, "translation": translation}],
+        "materials": [{"name": "left"}, {"name": "right"}],
+        "meshes": [
+            {"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]},
+            {"primitives": [{"attributes": {"POSITION": 0}, "indices": 2, "material": 1}]}
+        ],
+        "accessors": accessors, "bufferViews": views,
+        "buffers": [{"byteLength": bin.len(), "uri": format!(
+            "data:application/octet-stream;base64,{}",
+            base64::engine::general_purpose::STANDARD.encode(&bin))}]
+    });
+    serde_json::to_vec(&doc).unwrap()
+}
+
+#[test]
+fn a_gltf_of_two_meshes_in_one_frame_is_repaired_as_one_and_each_keeps_its_primitives() {
+    let dir = tempdir();
+    let (s, _) = cut(&grid_soup(20), [10.0, 10.0, 0.0], 4.0);
+    let src = dir.path().join("two.gltf");
+    std::fs::write(&src, two_mesh_grid_gltf(&s, [0.0, 0.0, 0.0])).unwrap();
+    let input = io::read(&src, None).unwrap();
+    let g = input.attrs.gltf.as_ref().unwrap();
+    assert_eq!(g.prims.iter().map(|p| p.mesh).collect::<Vec<_>>(), [0, 1]);
+    assert_eq!(
+        input.positions.len(),
+        s.v.len(),
+        "the meshes share their vertices"
+    );
+    let out = dir.path().join("out.gltf");
+    let log = dir.path().join("out.json");
+    let r = run(&[
+        "fill",
+        src.to_str().unwrap(),
+        out.to_str().unwrap(),
+        "--report",
+        log.to_str().unwrap(),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&std::fs::read(&log).unwrap()).unwrap();
+    assert_eq!(j["summary"]["filled"], 1, "{j}");
+    // both meshes keep their primitive; the patch is one new primitive in the mesh
+    // (and with the material) of the faces around the hole
+    let back = io::read(&out, None).unwrap();
+    let o = &back.attrs.gltf.as_ref().unwrap().json;
+    let doc: serde_json::Value = serde_json::from_slice(&std::fs::read(&src).unwrap()).unwrap();
+    let mut added = Vec::new();
+    for m in 0..2 {
+        let ps = o["meshes"][m]["primitives"].as_array().unwrap();
+        assert_eq!(ps[0], doc["meshes"][m]["primitives"][0]);
+        for p in &ps[1..] {
+            assert_eq!(p["material"], m, "{p}");
+            added.push(m);
+        }
+    }
+    assert_eq!(added.len(), 1, "{o}");
+    // every input vertex and triangle is there, bit for bit (read back, the patch's
+    // triangles follow those of its mesh's first primitive)
+    assert_eq!(back.positions[..input.positions.len()], input.positions[..]);
+    let bg = back.attrs.gltf.as_ref().unwrap();
+    let kept: Vec<[u32; 3]> = bg
+        .prims
+        .iter()
+        .filter(|p| p.index == 0)
+        .flat_map(|p| back.faces[p.first_face..p.first_face + p.faces].to_vec())
+        .collect();
+    assert_eq!(kept, input.faces);
+    assert!(back.faces.len() > input.faces.len());
+
+    // meshes placed in different frames: refused, with the reason
+    std::fs::write(&src, two_mesh_grid_gltf(&s, [5.0, 0.0, 0.0])).unwrap();
+    let e = io::read(&src, None).unwrap_err();
+    assert!(e.to_string().contains("different frames"), "{e}");
+    let r = run(&["fill", src.to_str().unwrap(), out.to_str().unwrap()]);
+    assert_eq!(r.status.code(), Some(65));
+}

@@ -321,6 +321,8 @@ pub struct StlExtras {
 /// A triangle primitive of the glTF mesh that was read.
 #[derive(Clone, Debug, PartialEq)]
 pub struct GltfPrim {
+    /// The mesh it belongs to (its index in the document's `meshes`).
+    pub mesh: usize,
     /// Its index in the mesh's `primitives`.
     pub index: usize,
     /// Its triangles in [`RawMesh::faces`]: `first_face..first_face + faces`.
@@ -346,7 +348,7 @@ pub struct GltfExtras {
     pub buffers: std::sync::Arc<[Vec<u8>]>,
     /// The buffer that is the GLB binary chunk, when read from a `.glb`.
     pub glb_bin: Option<usize>,
-    /// The mesh whose triangles were read.
+    /// The first mesh whose triangles were read (each primitive names its own).
     pub mesh: usize,
     pub prims: Vec<GltfPrim>,
     /// Per triangle read, its corners' glTF vertices (local to its primitive).
@@ -445,9 +447,15 @@ impl Attrs {
             out.push("STL header and facet attribute bytes".into());
         }
         if let Some(g) = &self.gltf {
+            let mut meshes: Vec<usize> = g.prims.iter().map(|p| p.mesh).collect();
+            meshes.dedup();
+            let meshes = meshes
+                .iter()
+                .map(usize::to_string)
+                .collect::<Vec<_>>()
+                .join(", ");
             out.push(format!(
-                "glTF document (mesh {}, {} triangle primitive(s), materials, textures, nodes, {} buffer(s))",
-                g.mesh,
+                "glTF document (mesh {meshes}, {} triangle primitive(s), materials, textures, nodes, {} buffer(s))",
                 g.prims.len(),
                 g.buffers.len()
             ));

@@ -1,9 +1,12 @@
 //! glTF 2.0: `.gltf` (JSON with its buffers) and `.glb` (binary), parsed and validated
 //! by the `gltf` crate.
 //!
-//! Reading takes the triangle primitives of the document's one mesh (a document with
-//! triangles in several meshes is refused with that reason; points, lines, strips and
-//! fans are kept as they are, not repaired). glTF vertices belong to one primitive and
+//! Reading takes the triangle primitives of every mesh with triangles as one mesh
+//! (points, lines, strips and fans are kept as they are, not repaired). Several such
+//! meshes are read only when they share one frame: every node that places one of them
+//! has the same world transform (equal matrices), so that their vertices are in the same
+//! coordinates; otherwise the document is refused with that reason (moving input
+//! vertices into a common frame would change them). glTF vertices belong to one primitive and
 //! are split at UV and normal seams, so the reader welds the vertices whose positions
 //! are bit-identical into one mesh vertex (in order of first appearance): seams and
 //! primitive borders are not holes. Each glTF vertex's normal and texture coordinate
@@ -106,7 +109,7 @@ pub(super) fn read(
         }
         buffers.push(data);
     }
-    // the one mesh with triangles
+    // the meshes with triangles, in one frame
     let meshes: Vec<_> = doc
         .meshes()
         .filter(|m| {
@@ -114,16 +117,14 @@ pub(super) fn read(
                 .any(|p| p.mode() == ::gltf::mesh::Mode::Triangles)
         })
         .collect();
-    let mesh = match meshes.as_slice() {
-        [m] => m.clone(),
-        [] => return Err(bad("the document has no mesh with triangles".into())),
-        more => {
-            return Err(bad(format!(
-            "the document has triangles in {} meshes; holefill repairs a glTF file with one mesh",
-            more.len()
-        )))
-        }
+    let Some(first_mesh) = meshes.first().map(|m| m.index()) else {
+        return Err(bad("the document has no mesh with triangles".into()));
     };
+    if meshes.len() > 1 {
+        let ids: Vec<usize> = meshes.iter().map(|m| m.index()).collect();
+        one_frame(&doc, &ids).map_err(bad)?;
+    }
+    let several = meshes.len() > 1;
     let mut raw = RawMesh {
         precision: Precision::F32,
         encoding: Encoding::BinaryLittleEndian,
@@ -139,10 +140,18 @@ pub(super) fn read(
     let mut weld: HashMap<[u32; 3], u32> = HashMap::new();
     let (mut any_uv, mut any_normal, mut any_color) = (false, false, false);
     let mut glvert = 0usize; // glTF vertices read so far (uv/normal value index)
-    for p in mesh.primitives() {
+    let all = meshes
+        .iter()
+        .flat_map(|m| m.primitives().map(move |p| (m.index(), p)));
+    for (mesh, p) in all {
+        let of_mesh = if several {
+            format!(" of mesh {mesh}")
+        } else {
+            String::new()
+        };
         if p.mode() != ::gltf::mesh::Mode::Triangles {
             raw.notes.push(format!(
-                "glTF primitive {} ({:?}) kept as it is, not repaired",
+                "glTF primitive {}{of_mesh} ({:?}) kept as it is, not repaired",
                 p.index(),
                 p.mode()
             ));
@@ -150,7 +159,7 @@ pub(super) fn read(
         }
         for a in p.attributes().map(|(_, a)| a).chain(p.indices()) {
             check_accessor(&a, &buffers)
-                .map_err(|m| bad(format!("primitive {}: {m}", p.index())))?;
+                .map_err(|m| bad(format!("primitive {}{of_mesh}: {m}", p.index())))?;
         }
         let reader = p.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
         let pos: Vec<[f32; 3]> = reader
@@ -244,6 +253,7 @@ pub(super) fn read(
             None => n_values.extend(std::iter::repeat_n([0.0; 3], n)),
         }
         prims.push(GltfPrim {
+            mesh,
             index: p.index(),
             first_face,
             faces: corners.len() - first_face,
@@ -281,13 +291,78 @@ pub(super) fn read(
         json,
         buffers: buffers.into(),
         glb_bin,
-        mesh: mesh.index(),
+        mesh: first_mesh,
         prims,
         corners,
         out_faces: Vec::new(),
         out_prim: Vec::new(),
     });
     Ok(raw)
+}
+
+/// Checks that every node placing one of `meshes` has the same world transform (the
+/// product of its ancestors' and its own matrices); a mesh no node places is taken in
+/// its own coordinates.
+fn one_frame(doc: &::gltf::Document, meshes: &[usize]) -> Result<(), String> {
+    type M4 = [[f32; 4]; 4];
+    let n = doc.nodes().count();
+    let mut parent: Vec<Option<usize>> = vec![None; n];
+    for node in doc.nodes() {
+        for c in node.children() {
+            if let Some(p) = parent.get_mut(c.index()) {
+                *p = Some(node.index());
+            }
+        }
+    }
+    let local: Vec<M4> = doc.nodes().map(|n| n.transform().matrix()).collect();
+    // column-major: m[column][row]
+    let mul = |a: &M4, b: &M4| -> M4 {
+        let mut out = [[0.0f32; 4]; 4];
+        for (c, col) in out.iter_mut().enumerate() {
+            for (r, x) in col.iter_mut().enumerate() {
+                *x = (0..4).map(|k| a[k][r] * b[c][k]).sum();
+            }
+        }
+        out
+    };
+    let world = |i: usize| -> Option<M4> {
+        let mut m = *local.get(i)?;
+        let mut at = i;
+        // a parent chain longer than the nodes is a cycle: no frame
+        for _ in 0..=n {
+            match parent.get(at).copied().flatten() {
+                None => return Some(m),
+                Some(p) => {
+                    m = mul(local.get(p)?, &m);
+                    at = p;
+                }
+            }
+        }
+        None
+    };
+    let mut frame: Option<(usize, M4)> = None;
+    for node in doc.nodes() {
+        let Some(m) = node.mesh().filter(|m| meshes.contains(&m.index())) else {
+            continue;
+        };
+        let w = world(node.index())
+            .ok_or_else(|| format!("node {} is its own ancestor", node.index()))?;
+        match frame {
+            None => frame = Some((node.index(), w)),
+            Some((first, f)) if f != w => {
+                return Err(format!(
+                    "the document has triangles in {} meshes placed in different frames \
+                     (node {first} and node {}, mesh {}, have different transforms); \
+                     holefill repairs several meshes only when they share one frame",
+                    meshes.len(),
+                    node.index(),
+                    m.index()
+                ))
+            }
+            Some(_) => {}
+        }
+    }
+    Ok(())
 }
 
 /// Checks that an accessor's bytes lie inside its buffer view and the view inside its
@@ -476,8 +551,8 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
         blob: Vec::new(),
         views: Vec::new(),
     };
-    let mut new_prims: Vec<Value> = Vec::new();
-    let mut emptied: Vec<usize> = Vec::new();
+    let mut new_prims: Vec<(usize, Value)> = Vec::new();
+    let mut emptied: Vec<(usize, usize)> = Vec::new();
     // primitives that lost input faces: a new index accessor
     if let Some((g, kept)) = &kept_faces {
         for p in prims {
@@ -490,7 +565,7 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
                 .flat_map(|j| g.corners[j])
                 .collect();
             if idx.is_empty() {
-                emptied.push(p.index);
+                emptied.push((p.mesh, p.index));
                 continue;
             }
             let bytes: Vec<u8> = idx.iter().flat_map(|i| i.to_le_bytes()).collect();
@@ -503,7 +578,7 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
                 ELEMENT_ARRAY_BUFFER,
                 None,
             );
-            doc["meshes"][mesh_index]["primitives"][p.index]["indices"] = json!(a);
+            doc["meshes"][p.mesh]["primitives"][p.index]["indices"] = json!(a);
         }
     }
     // the new faces (every face of a mesh not read from glTF), by target primitive
@@ -672,21 +747,37 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
         if let Some(m) = tp.and_then(|p| p.material) {
             prim["material"] = json!(m);
         }
-        new_prims.push(prim);
+        new_prims.push((tp.map_or(mesh_index, |p| p.mesh), prim));
     }
+    // each mesh that lost a primitive or gains one
+    let mut touched: Vec<usize> = vec![mesh_index];
+    for m in emptied
+        .iter()
+        .map(|e| e.0)
+        .chain(new_prims.iter().map(|p| p.0))
     {
-        let list = &mut doc["meshes"][mesh_index]["primitives"];
+        if !touched.contains(&m) {
+            touched.push(m);
+        }
+    }
+    for m in touched {
+        let mine: Vec<Value> = new_prims
+            .iter()
+            .filter(|p| p.0 == m)
+            .map(|p| p.1.clone())
+            .collect();
+        let list = &mut doc["meshes"][m]["primitives"];
         if let Value::Array(ps) = list {
             // primitives left with no face go (their accessors stay, unused)
             let mut i = 0;
             ps.retain(|_| {
-                let keep = !emptied.contains(&i);
+                let keep = !emptied.contains(&(m, i));
                 i += 1;
                 keep
             });
-            ps.extend(new_prims);
+            ps.extend(mine);
         } else {
-            *list = Value::Array(new_prims);
+            *list = Value::Array(mine);
         }
     }
     // where the new stretch lives; each buffer's bytes: as read (borrowed), zero
@@ -966,12 +1057,15 @@ mod tests {
             let e = read_mem(&serde_json::to_vec(&doc).unwrap(), Format::Gltf).unwrap_err();
             assert!(e.to_string().contains("relative"), "{uri}: {e}");
         }
-        // two meshes with triangles
+        // two meshes with triangles in different frames; a node its own ancestor
         let mut doc: Value = serde_json::from_slice(&square(false)).unwrap();
         let m = doc["meshes"][0].clone();
         doc["meshes"] = json!([m.clone(), m]);
+        doc["nodes"] = json!([{"mesh": 0}, {"mesh": 1, "translation": [1, 0, 0]}]);
         let e = read_mem(&serde_json::to_vec(&doc).unwrap(), Format::Gltf).unwrap_err();
-        assert!(e.to_string().contains("one mesh"), "{e}");
+        assert!(e.to_string().contains("different frames"), "{e}");
+        doc["nodes"] = json!([{"mesh": 0, "children": [1]}, {"mesh": 1, "children": [0]}]);
+        assert!(read_mem(&serde_json::to_vec(&doc).unwrap(), Format::Gltf).is_err());
     }
 
     #[test]
@@ -1016,6 +1110,33 @@ mod tests {
         })
         .unwrap_err();
         assert!(e.to_string().contains("relative"), "{e}");
+    }
+
+    #[test]
+    fn meshes_sharing_one_frame_read_as_one_and_write_back_unchanged() {
+        let mut doc: Value = serde_json::from_slice(&square(false)).unwrap();
+        let m = doc["meshes"][0].clone();
+        doc["meshes"] = json!([m.clone(), m]);
+        // the same frame: one node with no transform, one with an identity matrix
+        doc["nodes"] =
+            json!([{"mesh": 0}, {"mesh": 1, "matrix": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1]}]);
+        doc["scenes"] = json!([{"nodes": [0, 1]}]);
+        let bytes = serde_json::to_vec(&doc).unwrap();
+        let raw = read_mem(&bytes, Format::Gltf).unwrap();
+        assert_eq!(raw.positions.len(), 4, "welded across the meshes");
+        assert_eq!(raw.faces.len(), 4);
+        let g = raw.attrs.gltf.as_ref().unwrap();
+        assert_eq!(g.prims.iter().map(|p| p.mesh).collect::<Vec<_>>(), [0, 1]);
+        assert!(raw
+            .attrs
+            .names(&raw)
+            .iter()
+            .any(|n| n.contains("mesh 0, 1,")));
+        // written as read: the document unchanged
+        let mut out = Vec::new();
+        write(&mut out, &raw, false).unwrap();
+        let back: Value = serde_json::from_slice(&out).unwrap();
+        assert_eq!(back, doc);
     }
 
     #[test]
