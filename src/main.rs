@@ -99,7 +99,7 @@ struct FillArgs {
     /// A file the input names (a glTF buffer's uri, as written without `./` and `%XX`
     /// escapes) is read from PATH instead of beside the input (repeatable).
     #[arg(long, num_args = 2, value_names = ["NAME", "PATH"])]
-    resource: Vec<String>,
+    resource: Vec<PathBuf>,
     /// Read no file the input names but those given with --resource (the daemon).
     #[arg(long)]
     only_resources: bool,
@@ -265,7 +265,7 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
         files: args
             .resource
             .chunks_exact(2)
-            .map(|p| (p[0].clone(), PathBuf::from(&p[1])))
+            .map(|p| (p[0].to_string_lossy().into_owned(), p[1].clone()))
             .collect(),
         only: args.only_resources,
     };
