@@ -96,6 +96,13 @@ struct FillArgs {
     /// verified this way).
     #[arg(long)]
     input_format: Option<String>,
+    /// A file the input names (a glTF buffer's uri, as written without `./` and `%XX`
+    /// escapes) is read from PATH instead of beside the input (repeatable).
+    #[arg(long, num_args = 2, value_names = ["NAME", "PATH"])]
+    resource: Vec<PathBuf>,
+    /// Read no file the input names but those given with --resource (the daemon).
+    #[arg(long)]
+    only_resources: bool,
     /// Print nothing but errors and the FILL_TIME_S line.
     #[arg(long, short)]
     quiet: bool,
@@ -254,7 +261,15 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
         max_vertices: args.max_vertices,
         max_faces: args.max_faces,
     };
-    let raw = holefill::io::read_with_limits(&args.input, Some(in_format), &limits)
+    let resources = holefill::io::Resources {
+        files: args
+            .resource
+            .chunks_exact(2)
+            .map(|p| (p[0].to_string_lossy().into_owned(), p[1].clone()))
+            .collect(),
+        only: args.only_resources,
+    };
+    let raw = holefill::io::read_with_resources(&args.input, Some(in_format), &limits, &resources)
         .map_err(io_failure)?;
     let read_ms = t.elapsed().as_secs_f64() * 1000.0;
 

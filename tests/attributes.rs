@@ -738,3 +738,310 @@ fn a_gltf_without_holes_is_written_back_byte_for_byte() {
         );
     }
 }
+
+/// The holed 20 x 20 grid as OBJ with colours written 0..255: red and green linear in
+/// x and y (integers at the grid's vertices), blue constant.
+fn byte_colour_grid_obj(s: &Soup) -> String {
+    let mut t = String::new();
+    for p in &s.v {
+        let (r, g) = (40.0 + 8.0 * p[0], 30.0 + 9.0 * p[1]);
+        writeln!(t, "v {} {} {} {r} {g} 200", p[0], p[1], p[2]).unwrap();
+    }
+    for f in &s.f {
+        writeln!(t, "f {} {} {}", f[0] + 1, f[1] + 1, f[2] + 1).unwrap();
+    }
+    t
+}
+
+#[test]
+fn obj_byte_colours_come_back_as_written_and_new_vertices_in_the_same_scale() {
+    let dir = tempdir();
+    let vlines = |t: &str| -> Vec<String> {
+        t.lines()
+            .filter(|l| l.starts_with("v "))
+            .map(str::to_string)
+            .collect()
+    };
+    // no hole: every vertex line comes back as written
+    let whole = byte_colour_grid_obj(&grid_soup(6));
+    std::fs::write(dir.path().join("whole.obj"), &whole).unwrap();
+    let raw = io::read(&dir.path().join("whole.obj"), None).unwrap();
+    let (out, report) = repair(&raw);
+    assert_eq!(report.summary.filled, 0, "{:?}", report.summary); // the border is no hole
+    assert_eq!(out.positions.len(), raw.positions.len());
+    same_attrs(&raw, &out);
+    io::write(&dir.path().join("whole.out.obj"), &out, None).unwrap();
+    let text = std::fs::read_to_string(dir.path().join("whole.out.obj")).unwrap();
+    assert_eq!(vlines(&text), vlines(&whole));
+
+    // a hole: input vertices' lines unchanged, new vertices' colours 0..255, linear
+    let (s, _) = cut(&grid_soup(20), [10.0, 10.0, 0.0], 4.0);
+    let holed = byte_colour_grid_obj(&s);
+    let src = dir.path().join("holed.obj");
+    std::fs::write(&src, &holed).unwrap();
+    let raw = io::read(&src, None).unwrap();
+    let (out, report) = repair(&raw);
+    assert!(report.summary.filled >= 1);
+    let nv = raw.positions.len();
+    assert!(out.positions.len() > nv);
+    let dst = dir.path().join("out.obj");
+    io::write(&dst, &out, None).unwrap();
+    let text = std::fs::read_to_string(&dst).unwrap();
+    let (a, b) = (vlines(&holed), vlines(&text));
+    assert_eq!(b.len(), out.positions.len());
+    assert_eq!(a[..], b[..nv]);
+    for (v, line) in b.iter().enumerate().skip(nv) {
+        let t: Vec<f64> = line
+            .split_whitespace()
+            .skip(1)
+            .map(|x| x.parse().unwrap())
+            .collect();
+        assert_eq!(t.len(), 6, "{line}");
+        let p = out.positions[v];
+        assert!((t[3] - (40.0 + 8.0 * p.x)).abs() <= 0.5 + 1e-6, "{line}");
+        assert!((t[4] - (30.0 + 9.0 * p.y)).abs() <= 0.5 + 1e-6, "{line}");
+        assert_eq!(t[5], 200.0, "{line}");
+    }
+    // read back: the same values; the same 0..1 colours (new vertices': rounded to
+    // the byte the file holds)
+    let back = io::read(&dst, None).unwrap();
+    assert_eq!(back.attrs, out.attrs);
+    let (bc, oc) = (back.colors.unwrap(), out.colors.unwrap());
+    assert_eq!(bc[..nv], oc[..nv]);
+    for v in nv..oc.len() {
+        for k in 0..3 {
+            assert!((bc[v][k] - oc[v][k]).abs() <= 0.5 / 255.0 + 1e-6, "{v}");
+        }
+    }
+    assert!(report
+        .attributes
+        .interpolated
+        .iter()
+        .any(|s| s.starts_with("vertex red")));
+}
+
+/// OFF text of a soup with a colour `r g b a` on every face (the writer's layout).
+fn face_coloured_off(s: &Soup, colour: impl Fn(usize, &[usize; 3]) -> [u8; 4]) -> String {
+    let mut t = format!("OFF\n{} {} 0\n", s.v.len(), s.f.len());
+    for p in &s.v {
+        writeln!(t, "{} {} {}", p[0], p[1], p[2]).unwrap();
+    }
+    for (k, f) in s.f.iter().enumerate() {
+        let c = colour(k, f);
+        writeln!(
+            t,
+            "3 {} {} {} {} {} {} {}",
+            f[0], f[1], f[2], c[0], c[1], c[2], c[3]
+        )
+        .unwrap();
+    }
+    t
+}
+
+/// Each face's `red green blue alpha` values.
+fn face_colours(raw: &RawMesh) -> Vec<[f64; 4]> {
+    let col = |name: &str| match raw.attrs.face.iter().find(|p| p.name == name) {
+        Some(p) => match &p.data {
+            PropData::Scalar(v) => v.clone(),
+            _ => panic!("{name} is a list"),
+        },
+        None => panic!("no face property {name}"),
+    };
+    let c = ["red", "green", "blue", "alpha"].map(col);
+    (0..raw.faces.len())
+        .map(|j| [0, 1, 2, 3].map(|k| c[k].get(j).unwrap()))
+        .collect()
+}
+
+#[test]
+fn off_face_colours_are_kept_and_new_faces_take_the_colour_around_the_hole() {
+    let dir = tempdir();
+    // no hole: the file comes back identical
+    let g = grid_soup(4);
+    let whole = face_coloured_off(&g, |k, _| [(k * 37 % 256) as u8, 200, (k * 3) as u8, 255]);
+    std::fs::write(dir.path().join("whole.off"), &whole).unwrap();
+    let raw = io::read(&dir.path().join("whole.off"), None).unwrap();
+    assert_eq!(raw.attrs.face.len(), 4);
+    let (out, report) = repair(&raw);
+    assert_eq!(report.summary.filled, 0, "{:?}", report.summary);
+    io::write(&dir.path().join("whole.out.off"), &out, None).unwrap();
+    let text = std::fs::read_to_string(dir.path().join("whole.out.off")).unwrap();
+    assert_eq!(text, whole);
+
+    // a hole: input faces keep theirs; the faces around the hole are one colour,
+    // which every new face takes (all four channels from one face)
+    let s0 = icosphere(3);
+    let centre = [0.0, 0.0, 1.0];
+    let (s, _) = cut(&s0, centre, 0.3);
+    let near = |f: &[usize; 3]| {
+        let c = [0, 1, 2].map(|k| f.iter().map(|&i| s.v[i][k]).sum::<f64>() / 3.0);
+        (0..3)
+            .map(|k| (c[k] - centre[k]).powi(2))
+            .sum::<f64>()
+            .sqrt()
+            < 0.6
+    };
+    let text = face_coloured_off(&s, |k, f| {
+        if near(f) {
+            [10, 20, 30, 255]
+        } else {
+            [
+                (k % 256) as u8,
+                (k * 7 % 256) as u8,
+                255 - (k % 256) as u8,
+                128,
+            ]
+        }
+    });
+    let src = dir.path().join("holed.off");
+    std::fs::write(&src, text).unwrap();
+    let raw = io::read(&src, None).unwrap();
+    let (out, report) = repair(&raw);
+    assert_eq!(report.summary.filled, 1);
+    let key = |f: [u32; 3]| {
+        let mut k = f;
+        k.sort_unstable();
+        k
+    };
+    let input: std::collections::HashMap<[u32; 3], usize> = raw
+        .faces
+        .iter()
+        .enumerate()
+        .map(|(j, &f)| (key(f), j))
+        .collect();
+    let (a, b) = (face_colours(&raw), face_colours(&out));
+    let mut new = 0;
+    for (f, c) in out.faces.iter().zip(&b) {
+        let in_face = (f.iter().all(|&v| (v as usize) < raw.positions.len()))
+            .then(|| input.get(&key(*f)))
+            .flatten();
+        match in_face {
+            Some(&j) => assert_eq!(c.map(f64::to_bits), a[j].map(f64::to_bits)),
+            None => {
+                new += 1;
+                assert_eq!(*c, [10.0, 20.0, 30.0, 255.0]);
+            }
+        }
+    }
+    assert!(new > 0);
+    assert!(
+        report
+            .attributes
+            .interpolated
+            .iter()
+            .any(|s| s == "face red: the most common colour of the faces around the hole"),
+        "{:?}",
+        report.attributes
+    );
+    assert!(report.attributes.read.iter().any(|s| s == "face red (u8)"));
+    // written and read back: the same values
+    let back = write_read(&out, dir.path(), "out.off");
+    assert_eq!(back.attrs, out.attrs);
+}
+
+/// The holed 20 x 20 grid as a `.gltf` of two meshes (the faces left and right of
+/// x = 10, each with its own material and index accessor, one POSITION accessor shared),
+/// each placed by a node of its own (the second with `translation`).
+fn two_mesh_grid_gltf(s: &Soup, translation: [f64; 3]) -> Vec<u8> {
+    use base64::Engine as _;
+    use serde_json::json;
+    let mut bin: Vec<u8> = Vec::new();
+    for p in &s.v {
+        for x in p {
+            bin.extend_from_slice(&(*x as f32).to_le_bytes());
+        }
+    }
+    let mut views = vec![json!({"buffer": 0, "byteOffset": 0, "byteLength": bin.len()})];
+    let mut accessors = vec![json!({"bufferView": 0, "componentType": 5126,
+        "count": s.v.len(), "type": "VEC3", "min": [0, 0, 0], "max": [20, 20, 0]})];
+    let centre_x = |f: &[usize; 3]| f.iter().map(|&i| s.v[i][0]).sum::<f64>() / 3.0;
+    for left in [true, false] {
+        let off = bin.len();
+        let mut n = 0;
+        for f in s.f.iter().filter(|f| (centre_x(f) < 10.0) == left) {
+            for &i in f {
+                bin.extend_from_slice(&(i as u32).to_le_bytes());
+                n += 1;
+            }
+        }
+        views.push(json!({"buffer": 0, "byteOffset": off, "byteLength": bin.len() - off}));
+        accessors.push(json!({"bufferView": views.len() - 1, "componentType": 5125,
+            "count": n, "type": "SCALAR"}));
+    }
+    let doc = json!({
+        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0, 1]}],
+        "nodes": [{"mesh": 0}, {"mesh": 1, "translation": translation}],
+        "materials": [{"name": "left"}, {"name": "right"}],
+        "meshes": [
+            {"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]},
+            {"primitives": [{"attributes": {"POSITION": 0}, "indices": 2, "material": 1}]}
+        ],
+        "accessors": accessors, "bufferViews": views,
+        "buffers": [{"byteLength": bin.len(), "uri": format!(
+            "data:application/octet-stream;base64,{}",
+            base64::engine::general_purpose::STANDARD.encode(&bin))}]
+    });
+    serde_json::to_vec(&doc).unwrap()
+}
+
+#[test]
+fn a_gltf_of_two_meshes_in_one_frame_is_repaired_as_one_and_each_keeps_its_primitives() {
+    let dir = tempdir();
+    let (s, _) = cut(&grid_soup(20), [10.0, 10.0, 0.0], 4.0);
+    let src = dir.path().join("two.gltf");
+    std::fs::write(&src, two_mesh_grid_gltf(&s, [0.0, 0.0, 0.0])).unwrap();
+    let input = io::read(&src, None).unwrap();
+    let g = input.attrs.gltf.as_ref().unwrap();
+    assert_eq!(g.prims.iter().map(|p| p.mesh).collect::<Vec<_>>(), [0, 1]);
+    assert_eq!(
+        input.positions.len(),
+        s.v.len(),
+        "the meshes share their vertices"
+    );
+    let out = dir.path().join("out.gltf");
+    let log = dir.path().join("out.json");
+    let r = run(&[
+        "fill",
+        src.to_str().unwrap(),
+        out.to_str().unwrap(),
+        "--report",
+        log.to_str().unwrap(),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&std::fs::read(&log).unwrap()).unwrap();
+    assert_eq!(j["summary"]["filled"], 1, "{j}");
+    // both meshes keep their primitive; the patch is one new primitive in the mesh
+    // (and with the material) of the faces around the hole
+    let back = io::read(&out, None).unwrap();
+    let o = &back.attrs.gltf.as_ref().unwrap().json;
+    let doc: serde_json::Value = serde_json::from_slice(&std::fs::read(&src).unwrap()).unwrap();
+    let mut added = Vec::new();
+    for m in 0..2 {
+        let ps = o["meshes"][m]["primitives"].as_array().unwrap();
+        assert_eq!(ps[0], doc["meshes"][m]["primitives"][0]);
+        for p in &ps[1..] {
+            assert_eq!(p["material"], m, "{p}");
+            added.push(m);
+        }
+    }
+    assert_eq!(added.len(), 1, "{o}");
+    // every input vertex and triangle is there, bit for bit (read back, the patch's
+    // triangles follow those of its mesh's first primitive)
+    assert_eq!(back.positions[..input.positions.len()], input.positions[..]);
+    let bg = back.attrs.gltf.as_ref().unwrap();
+    let kept: Vec<[u32; 3]> = bg
+        .prims
+        .iter()
+        .filter(|p| p.index == 0)
+        .flat_map(|p| back.faces[p.first_face..p.first_face + p.faces].to_vec())
+        .collect();
+    assert_eq!(kept, input.faces);
+    assert!(back.faces.len() > input.faces.len());
+
+    // meshes placed in different frames: refused, with the reason
+    std::fs::write(&src, two_mesh_grid_gltf(&s, [5.0, 0.0, 0.0])).unwrap();
+    let e = io::read(&src, None).unwrap_err();
+    assert!(e.to_string().contains("different frames"), "{e}");
+    let r = run(&["fill", src.to_str().unwrap(), out.to_str().unwrap()]);
+    assert_eq!(r.status.code(), Some(65));
+}

@@ -448,3 +448,174 @@ fn a_mesh_waiting_for_its_set_goes_back_to_the_inbox_on_sigterm() {
     );
     assert_whole(&f.outbox, "w", &mtl_text("w.jpg"), &jpg);
 }
+
+/// The test mesh as a `.gltf` whose buffer is the external file `bin` and which names
+/// the images `images` (and one `data:` image, no file): the document and the
+/// buffer's bytes.
+fn gltf_set(bin: &str, images: &[&str]) -> (String, Vec<u8>) {
+    use base64::Engine as _;
+    let dir = tempfile::tempdir().unwrap();
+    fs::write(dir.path().join("m.obj"), mesh().0).unwrap();
+    let raw = holefill::io::read(&dir.path().join("m.obj"), None).unwrap();
+    holefill::io::write(&dir.path().join("m.gltf"), &raw, None).unwrap();
+    let mut doc: Value =
+        serde_json::from_slice(&fs::read(dir.path().join("m.gltf")).unwrap()).unwrap();
+    let uri = doc["buffers"][0]["uri"].as_str().unwrap().to_string();
+    let (_, b64) = uri.split_once(";base64,").unwrap();
+    let bytes = base64::engine::general_purpose::STANDARD
+        .decode(b64)
+        .unwrap();
+    doc["buffers"][0]["uri"] = Value::from(bin);
+    let mut imgs: Vec<Value> = images
+        .iter()
+        .map(|u| serde_json::json!({ "uri": u }))
+        .collect();
+    imgs.push(serde_json::json!({"uri": "data:image/png;base64,iVBORw0KGgo="}));
+    doc["images"] = Value::from(imgs);
+    (serde_json::to_string_pretty(&doc).unwrap(), bytes)
+}
+
+/// Any bytes standing in for a PNG.
+fn png_bytes(seed: u8) -> Vec<u8> {
+    let mut v = b"\x89PNG\r\n\x1a\n".to_vec();
+    v.extend((0..2000u32).map(|i| (i as u8).wrapping_mul(17).wrapping_add(seed)));
+    v
+}
+
+#[test]
+fn a_gltf_with_its_bin_and_png_dropped_in_any_order_comes_out_whole() {
+    let f = Folders::new();
+    let d = Daemon::ready(&f, &["--set-wait-secs", "60"], &[]);
+    // (stem, order of the drops: g = .gltf, b = .bin, p = .png)
+    let orders = [("ga", "gbp"), ("gb", "pbg"), ("gc", "bgp")];
+    let mut inputs = Vec::new();
+    for (k, (stem, order)) in orders.iter().enumerate() {
+        let (gltf, bin) = gltf_set(&format!("{stem}.bin"), &[&format!("{stem}.png")]);
+        let png = png_bytes(k as u8);
+        for c in order.chars() {
+            match c {
+                'g' => drop_renamed(&f.inbox, &format!("{stem}.gltf"), &gltf),
+                'b' => drop_bytes(&f.inbox, &format!("{stem}.bin"), &bin),
+                _ => drop_bytes(&f.inbox, &format!("{stem}.png"), &png),
+            }
+            std::thread::sleep(Duration::from_millis(700));
+        }
+        inputs.push((stem, gltf, bin, png));
+    }
+    assert!(
+        wait_until(Duration::from_secs(60), || orders.iter().all(|(s, _)| f
+            .outbox
+            .join(format!("{s}.gltf.repair.json"))
+            .exists())),
+        "not all sets published: outbox {:?}\n{}",
+        Folders::files(&f.outbox),
+        d.log()
+    );
+    assert!(
+        d.log().contains("ga.gltf: its set waits for"),
+        "{}",
+        d.log()
+    );
+    for (stem, gltf, bin, png) in &inputs {
+        let log = Folders::log(&f.outbox, &format!("{stem}.gltf"));
+        assert_eq!(log["status"], "repaired", "{log}");
+        assert_eq!(
+            member_names(&log),
+            vec![format!("{stem}.bin"), format!("{stem}.png")]
+        );
+        // the repaired document still names its buffer file, which is beside it
+        // unchanged (the patch is in a data: URI), and reads with its holes closed
+        let out = f.outbox.join(format!("{stem}.gltf"));
+        let doc: Value = serde_json::from_slice(&fs::read(&out).unwrap()).unwrap();
+        assert_eq!(doc["buffers"][0]["uri"], format!("{stem}.bin"));
+        assert_eq!(
+            fs::read(f.outbox.join(format!("{stem}.bin"))).unwrap(),
+            *bin
+        );
+        assert_eq!(
+            fs::read(f.outbox.join(format!("{stem}.png"))).unwrap(),
+            *png
+        );
+        let repaired = holefill::io::read(&out, None).unwrap();
+        assert!(repaired.faces.len() > mesh().1, "the holes were filled");
+        // archived together, unchanged
+        assert_eq!(
+            fs::read_to_string(f.archive.join(format!("{stem}.gltf"))).unwrap(),
+            *gltf
+        );
+        assert_eq!(
+            fs::read(f.archive.join(format!("{stem}.bin"))).unwrap(),
+            *bin
+        );
+        assert_eq!(
+            fs::read(f.archive.join(format!("{stem}.png"))).unwrap(),
+            *png
+        );
+    }
+    assert!(
+        Folders::files(&f.inbox).is_empty(),
+        "{:?}",
+        Folders::files(&f.inbox)
+    );
+}
+
+#[test]
+fn a_gltf_missing_its_bin_fails_and_hostile_uris_are_never_followed() {
+    let f = Folders::new();
+    let secret = f.root().join("secret.bin");
+    fs::write(&secret, b"secret").unwrap();
+    let d = Daemon::ready(&f, &["--set-wait-secs", "2"], &[]);
+    // the buffer never comes; the image does
+    let (gltf, _) = gltf_set("gm.bin", &["gm.png"]);
+    drop_bytes(&f.inbox, "gm.png", &png_bytes(1));
+    drop_renamed(&f.inbox, "gm.gltf", &gltf);
+    // a buffer outside the inbox, images by absolute path and through a symlink
+    std::os::unix::fs::symlink(&secret, f.inbox.join("link.png")).unwrap();
+    let (hostile, _) = gltf_set(
+        "../secret.bin",
+        &[&secret.display().to_string(), "link.png"],
+    );
+    drop_renamed(&f.inbox, "gh.gltf", &hostile);
+    assert!(
+        wait_until(Duration::from_secs(30), || f
+            .failed
+            .join("gm.gltf.repair.json")
+            .exists()
+            && f.failed.join("gh.gltf.repair.json").exists()),
+        "failed: {:?}\n{}",
+        Folders::files(&f.failed),
+        d.log()
+    );
+    let log = Folders::log(&f.failed, "gm.gltf");
+    assert_eq!(log["stage"], "set", "{log}");
+    let err = log["error"].as_str().unwrap();
+    assert!(
+        err.contains("missing buffer gm.bin (named by gm.gltf)"),
+        "{err}"
+    );
+    assert_eq!(member_names(&log), vec!["gm.png"]);
+    assert_eq!(fs::read_to_string(f.failed.join("gm.gltf")).unwrap(), gltf);
+    assert_eq!(fs::read(f.failed.join("gm.png")).unwrap(), png_bytes(1));
+    // nothing outside the inbox was read: the buffer's reference is listed as not
+    // followed and the repair cannot read it
+    let log = Folders::log(&f.failed, "gh.gltf");
+    let refused = log["daemon"]["set"]["not_followed"].as_array().unwrap();
+    let why = |r: &str| {
+        refused
+            .iter()
+            .find(|x| x["reference"].as_str().is_some_and(|s| s.contains(r)))
+            .and_then(|x| x["why"].as_str())
+            .unwrap_or_else(|| panic!("{r} not listed as not followed: {refused:?}"))
+            .to_string()
+    };
+    assert!(why("../secret.bin").contains(".."));
+    assert!(why(&secret.display().to_string()).contains("absolute"));
+    assert!(why("link.png").contains("not a regular file"));
+    assert!(!refused.iter().any(|x| x["reference"]
+        .as_str()
+        .is_some_and(|s| s.starts_with("data:"))));
+    let err = log["error"].as_str().unwrap();
+    assert!(err.contains("secret.bin"), "{err}");
+    assert_eq!(fs::read(&secret).unwrap(), b"secret");
+    assert!(Folders::models(&f).is_empty());
+}

@@ -189,3 +189,53 @@ fn a_set_travels_through_the_gateway_together_and_results_keep_sets_whole() {
     // the first set is untouched
     assert_eq!(std::fs::read(dir.join("t.jpg")).unwrap(), jpg);
 }
+
+#[test]
+fn a_gltf_set_with_its_bin_is_repaired_by_a_queue_worker() {
+    use base64::Engine as _;
+    let nats = Nats::start();
+    let w = Worker::start(&nats, &["--ack-wait-secs", "10"], &[]);
+    let f = Folders::new();
+    let d = Daemon::ready(
+        &f,
+        &["--forward", &nats.url(), "--set-wait-secs", "60"],
+        &[],
+    );
+    // the holed mesh as a .gltf whose buffer is the file s.bin
+    let tmp = f.root().join("make");
+    std::fs::create_dir(&tmp).unwrap();
+    std::fs::write(tmp.join("s.obj"), holed_obj(2)).unwrap();
+    let raw = holefill::io::read(&tmp.join("s.obj"), None).unwrap();
+    holefill::io::write(&tmp.join("s.gltf"), &raw, None).unwrap();
+    let mut doc: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(tmp.join("s.gltf")).unwrap()).unwrap();
+    let uri = doc["buffers"][0]["uri"].as_str().unwrap().to_string();
+    let bin = base64::engine::general_purpose::STANDARD
+        .decode(uri.split_once(";base64,").unwrap().1)
+        .unwrap();
+    doc["buffers"][0]["uri"] = serde_json::json!("s.bin");
+    drop_bytes(&f.inbox, "s.bin", &bin);
+    drop_renamed(&f.inbox, "s.gltf", &doc.to_string());
+    let dump = || format!("daemon:\n{}\nworker:\n{}", d.log(), w.log());
+    assert!(
+        wait_until(Duration::from_secs(60), || f
+            .outbox
+            .join("s.gltf.repair.json")
+            .exists()),
+        "{}",
+        dump()
+    );
+    let log = Folders::log(&f.outbox, "s.gltf");
+    assert_eq!(log["status"], "repaired", "{log}");
+    assert_eq!(
+        log["worker"]["files"],
+        serde_json::json!(["s.gltf", "s.bin"]),
+        "{log}"
+    );
+    assert_eq!(std::fs::read(f.outbox.join("s.bin")).unwrap(), bin);
+    let out = holefill::io::read(&f.outbox.join("s.gltf"), None).unwrap();
+    assert!(out.faces.len() > raw.faces.len(), "{}", dump());
+    for n in ["s.gltf", "s.bin"] {
+        assert!(f.archive.join(n).is_file(), "{n} archived");
+    }
+}

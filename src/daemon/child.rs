@@ -15,7 +15,7 @@
 use super::hooks::Hooks;
 use std::fs;
 use std::io;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Stdio;
 use std::time::Duration;
 use tokio::io::AsyncReadExt;
@@ -44,6 +44,9 @@ pub struct Spec<'a> {
     pub hooks: &'a Hooks,
     /// Where the child draws its picture of the repair (`fill --picture`); `None`: none.
     pub picture: Option<&'a Path>,
+    /// The files of the mesh's set that its reader needs (glTF buffers), by the name
+    /// the mesh gives them (`fill --resource NAME PATH`).
+    pub resources: &'a [(String, PathBuf)],
 }
 
 /// What the child reads.
@@ -108,6 +111,14 @@ pub async fn run(
     }
     if let Some(p) = spec.picture {
         cmd.arg("--picture").arg(p);
+    }
+    // the files a mesh names are read from its set's members only (never beside
+    // /proc/self/fd/0)
+    if matches!(input, Input::Stdin(_)) {
+        cmd.arg("--only-resources");
+    }
+    for (name, path) in spec.resources {
+        cmd.arg("--resource").arg(name).arg(path);
     }
     // the read limits, enforced by the reader too: the header sniff cannot count
     // vertices, nor triangles of fanned polygons
@@ -320,6 +331,7 @@ mod tests {
             cores: 2,
             hooks: &hooks,
             picture: None,
+            resources: &[],
         };
         let s = wrapper_script(&spec, "a.obj");
         let v = s.find("ulimit -v 102400").expect("memory limit");

@@ -178,8 +178,9 @@ pub fn run(args: WatchArgs) -> Result<()> {
 /// A claimed mesh waiting for the other files of its set (see [`sets`]).
 struct Parked {
     job: Job,
-    /// Its references as written (`mtllib` arguments, PLY `TextureFile` names).
-    refs: Vec<String>,
+    /// Its references as written (`mtllib` arguments, PLY `TextureFile` names, glTF
+    /// buffer and image URIs), with what each is to it.
+    refs: Vec<(String, Role)>,
     /// Since when no member became complete (the set's timeout counts from here).
     since: Instant,
     /// Members complete at the last look.
@@ -884,12 +885,11 @@ impl Daemon {
         let inbox = self.layout.inbox.clone();
         let (settle, max_wait) = (self.settings.settle, self.settings.max_wait);
         let mesh = p.job.name_str().unwrap_or_default().to_string();
-        let is_obj = mesh.to_ascii_lowercase().ends_with(".obj");
         let mut set = SetRec::default();
         let mut not_yet: Vec<String> = Vec::new();
         let mut wanted: Vec<(String, Role, String)> = Vec::new();
-        for r in &p.refs {
-            if is_obj {
+        for (r, role) in &p.refs {
+            if *role == Role::MaterialLibrary {
                 // a whole name with spaces is looked for only when it is one to follow
                 let exists = |w: &str| {
                     sets::member_name(w, &mesh).is_ok()
@@ -899,7 +899,7 @@ impl Daemon {
                     wanted.push((n, Role::MaterialLibrary, mesh.clone()));
                 }
             } else {
-                wanted.push((r.clone(), Role::Texture, mesh.clone()));
+                wanted.push((r.clone(), *role, mesh.clone()));
             }
         }
         let mut k = 0;
@@ -1217,7 +1217,7 @@ impl Daemon {
             }
             Done::Members { job, refs } => {
                 let name = job.shown();
-                let named: Vec<String> = refs.iter().map(|r| shown(OsStr::new(r))).collect();
+                let named: Vec<String> = refs.iter().map(|(r, _)| shown(OsStr::new(r))).collect();
                 tracing::info!(file = %name, "{name}: a set (it names {}): waiting for its files", named.join(", "));
                 self.sets.push(Parked {
                     job,

@@ -50,6 +50,8 @@ pub const MAX_MTL_BYTES: u64 = 4 << 20;
 pub enum Role {
     MaterialLibrary,
     Texture,
+    /// A glTF buffer kept in a file of its own (`.bin`): read with the mesh.
+    Buffer,
 }
 
 impl Role {
@@ -58,6 +60,7 @@ impl Role {
         match self {
             Role::MaterialLibrary => "material library",
             Role::Texture => "texture",
+            Role::Buffer => "buffer",
         }
     }
 }

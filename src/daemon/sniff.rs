@@ -4,6 +4,7 @@
 //! (an OBJ polygon of n corners counts n - 2 triangles). `None` when the file does not
 //! say (the worker then reads it; a malformed file fails there).
 
+use super::sets::Role;
 use std::fs::File;
 use std::io::{BufRead, BufReader, Read, Seek, SeekFrom};
 
@@ -32,24 +33,35 @@ pub fn declared_faces(f: &File, name: &str) -> Option<u64> {
     }
 }
 
-/// The other files a mesh names, as written: an OBJ's `mtllib` arguments (the whole
-/// rest of each line, trimmed, its `#` comment removed; every line of the file is
-/// looked at, streaming, [`LINE_PREFIX`] bytes of each) and a PLY header's
-/// `comment TextureFile NAME` lines. Other formats name none. Reads from the start,
-/// through its own offset; `Err` when the file cannot be read.
-pub fn references(f: &File, name: &str) -> std::io::Result<Vec<String>> {
+/// The other files a mesh names, as written, with what each is to it: an OBJ's
+/// `mtllib` arguments (the whole rest of each line, trimmed, its `#` comment removed;
+/// every line of the file is looked at, streaming, [`LINE_PREFIX`] bytes of each), a
+/// PLY header's `comment TextureFile NAME` lines, a glTF document's external buffers
+/// and images (`uri`s that are not `data:`, `%XX` decoded; the JSON of a `.gltf`, at
+/// most [`MAX_GLTF_JSON`] bytes, or a `.glb`'s JSON chunk). Other formats name none.
+/// Reads from the start, through its own offset; `Err` when the file cannot be read.
+/// A glTF document that cannot be parsed names none (its repair says what is wrong).
+pub fn references(f: &File, name: &str) -> std::io::Result<Vec<(String, Role)>> {
     let lower = name.to_ascii_lowercase();
     let obj = lower.ends_with(".obj");
+    if lower.ends_with(".gltf") || lower.ends_with(".glb") {
+        return gltf_references(f, lower.ends_with(".glb"));
+    }
     if !obj && !lower.ends_with(".ply") {
         return Ok(Vec::new());
     }
+    let role = if obj {
+        Role::MaterialLibrary
+    } else {
+        Role::Texture
+    };
     let mut f = f.try_clone()?;
     f.seek(SeekFrom::Start(0))?;
-    let mut out: Vec<String> = Vec::new();
+    let mut out: Vec<(String, Role)> = Vec::new();
     let mut push = |s: &str| {
         let s = s.trim();
-        if !s.is_empty() && !out.iter().any(|o| o == s) {
-            out.push(s.to_string());
+        if !s.is_empty() && !out.iter().any(|o| o.0 == s) {
+            out.push((s.to_string(), role));
         }
     };
     let mut lines = 0usize;
@@ -80,6 +92,41 @@ pub fn references(f: &File, name: &str) -> std::io::Result<Vec<String>> {
         true
     });
     Ok(out)
+}
+
+/// The most of a glTF document's JSON read for its references.
+pub const MAX_GLTF_JSON: u64 = 256 << 20;
+
+/// The external buffers ([`Role::Buffer`]) and images ([`Role::Texture`]) of the
+/// glTF document in `f` (a `.glb`: its first chunk, when it is the JSON chunk).
+fn gltf_references(f: &File, glb: bool) -> std::io::Result<Vec<(String, Role)>> {
+    let mut f = f.try_clone()?;
+    f.seek(SeekFrom::Start(0))?;
+    let mut json = Vec::new();
+    if glb {
+        let mut head = [0u8; 20];
+        if f.read_exact(&mut head).is_err() || &head[16..20] != b"JSON" {
+            return Ok(Vec::new());
+        }
+        let len = u32::from_le_bytes([head[12], head[13], head[14], head[15]]);
+        (&mut f)
+            .take(u64::from(len).min(MAX_GLTF_JSON))
+            .read_to_end(&mut json)?;
+    } else {
+        (&mut f).take(MAX_GLTF_JSON).read_to_end(&mut json)?;
+    }
+    Ok(holefill::io::attrs::gltf_external(&json)
+        .unwrap_or_default()
+        .into_iter()
+        .map(|r| {
+            let role = if r.buffer {
+                Role::Buffer
+            } else {
+                Role::Texture
+            };
+            (r.name, role)
+        })
+        .collect())
 }
 
 /// Calls `f` with the first [`LINE_PREFIX`] bytes of each line (without the newline)
@@ -303,7 +350,11 @@ mod tests {
         )
         .unwrap();
         let f = File::open(&p).unwrap();
-        assert_eq!(references(&f, "a.obj").unwrap(), vec!["a.mtl", "b c.mtl"]);
+        let names = |r: Vec<(String, Role)>| r.into_iter().map(|(n, _)| n).collect::<Vec<_>>();
+        assert_eq!(
+            names(references(&f, "a.obj").unwrap()),
+            vec!["a.mtl", "b c.mtl"]
+        );
         let p = d.path().join("b.PLY");
         std::fs::write(
             &p,
@@ -311,7 +362,44 @@ mod tests {
         )
         .unwrap();
         let f = File::open(&p).unwrap();
-        assert_eq!(references(&f, "b.PLY").unwrap(), vec!["tex 1.png"]);
+        assert_eq!(
+            references(&f, "b.PLY").unwrap(),
+            vec![("tex 1.png".to_string(), Role::Texture)]
+        );
         assert!(references(&f, "b.stl").unwrap().is_empty());
+    }
+
+    #[test]
+    fn references_of_gltf_and_glb() {
+        let d = tempfile::tempdir().unwrap();
+        let json = r#"{"asset":{"version":"2.0"},"buffers":[{"byteLength":4,"uri":"s%20a.bin"},
+            {"byteLength":1,"uri":"data:application/octet-stream;base64,AA=="},{"byteLength":4,"uri":"s%20a.bin"}],
+            "images":[{"uri":"tex.png"},{"bufferView":0,"mimeType":"image/png"},{"uri":"../x.png"}]}"#;
+        let p = d.path().join("s.gltf");
+        std::fs::write(&p, json).unwrap();
+        let want = vec![
+            ("s a.bin".to_string(), Role::Buffer),
+            ("tex.png".to_string(), Role::Texture),
+            ("../x.png".to_string(), Role::Texture),
+        ];
+        assert_eq!(
+            references(&File::open(&p).unwrap(), "s.gltf").unwrap(),
+            want
+        );
+        // the same JSON as a GLB's first chunk
+        let mut glb = b"glTF".to_vec();
+        glb.extend_from_slice(&2u32.to_le_bytes());
+        glb.extend_from_slice(&((20 + json.len()) as u32).to_le_bytes());
+        glb.extend_from_slice(&(json.len() as u32).to_le_bytes());
+        glb.extend_from_slice(b"JSON");
+        glb.extend_from_slice(json.as_bytes());
+        let p = d.path().join("s.GLB");
+        std::fs::write(&p, glb).unwrap();
+        assert_eq!(references(&File::open(&p).unwrap(), "s.GLB").unwrap(), want);
+        // not JSON: nothing named (the repair says what is wrong)
+        std::fs::write(&p, "glTF garbage").unwrap();
+        assert!(references(&File::open(&p).unwrap(), "s.glb")
+            .unwrap()
+            .is_empty());
     }
 }

@@ -84,6 +84,7 @@ impl RunCtx {
             cores: self.cores,
             hooks: &self.hooks,
             picture: None,
+            resources: &[],
         }
     }
 }
@@ -126,9 +127,13 @@ pub enum Done {
     /// Vanished from the processing folder (removed by someone with the daemon's
     /// rights, or with the whole inbox).
     Gone { job: Job, error: String },
-    /// The mesh names other files (`mtllib`, `TextureFile`): it waits, claimed, for the
-    /// members of its set (`refs`: the references as written).
-    Members { job: Job, refs: Vec<String> },
+    /// The mesh names other files (`mtllib`, `TextureFile`, glTF `uri`s): it waits,
+    /// claimed, for the members of its set (`refs`: the references as written, with
+    /// what each is).
+    Members {
+        job: Job,
+        refs: Vec<(String, super::sets::Role)>,
+    },
 }
 
 impl Done {
@@ -204,8 +209,17 @@ pub async fn process(ctx: Arc<RunCtx>, job: Job, mut cancel: watch::Receiver<boo
             .await
         }
         None => {
+            // glTF buffers of the set: read by the child from their claimed copies
+            let resources: Vec<(String, PathBuf)> = job
+                .members()
+                .iter()
+                .enumerate()
+                .filter(|(_, m)| m.role == super::sets::Role::Buffer)
+                .map(|(i, m)| (m.name.clone(), job.member_path(i)))
+                .collect();
             let spec = child::Spec {
                 picture: ctx.settings.picture.then_some(picture.as_path()),
+                resources: &resources,
                 ..ctx.child_spec()
             };
             child::run(

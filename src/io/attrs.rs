@@ -293,6 +293,9 @@ pub struct ObjExtras {
     pub states: Vec<ObjState>,
     /// Per triangle, its state (empty when the file has no `usemtl`/`g`/`o`/`s`).
     pub face_state: Vec<u32>,
+    /// The vertex colours were written 0..255 (`v x y z 255 128 0`): the vertex
+    /// properties `red green blue` hold them as written and the writer writes those.
+    pub byte_colors: bool,
 }
 
 /// PLY extras: header lines and the elements other than vertex and face.
@@ -318,6 +321,8 @@ pub struct StlExtras {
 /// A triangle primitive of the glTF mesh that was read.
 #[derive(Clone, Debug, PartialEq)]
 pub struct GltfPrim {
+    /// The mesh it belongs to (its index in the document's `meshes`).
+    pub mesh: usize,
     /// Its index in the mesh's `primitives`.
     pub index: usize,
     /// Its triangles in [`RawMesh::faces`]: `first_face..first_face + faces`.
@@ -338,11 +343,12 @@ pub struct GltfPrim {
 pub struct GltfExtras {
     /// The JSON document as read.
     pub json: serde_json::Value,
-    /// Every buffer's bytes, by buffer index.
-    pub buffers: Vec<Vec<u8>>,
+    /// Every buffer's bytes, by buffer index (shared: the repaired mesh's extras and
+    /// the input's hold one copy).
+    pub buffers: std::sync::Arc<[Vec<u8>]>,
     /// The buffer that is the GLB binary chunk, when read from a `.glb`.
     pub glb_bin: Option<usize>,
-    /// The mesh whose triangles were read.
+    /// The first mesh whose triangles were read (each primitive names its own).
     pub mesh: usize,
     pub prims: Vec<GltfPrim>,
     /// Per triangle read, its corners' glTF vertices (local to its primitive).
@@ -441,9 +447,15 @@ impl Attrs {
             out.push("STL header and facet attribute bytes".into());
         }
         if let Some(g) = &self.gltf {
+            let mut meshes: Vec<usize> = g.prims.iter().map(|p| p.mesh).collect();
+            meshes.dedup();
+            let meshes = meshes
+                .iter()
+                .map(usize::to_string)
+                .collect::<Vec<_>>()
+                .join(", ");
             out.push(format!(
-                "glTF document (mesh {}, {} triangle primitive(s), materials, textures, nodes, {} buffer(s))",
-                g.mesh,
+                "glTF document (mesh {meshes}, {} triangle primitive(s), materials, textures, nodes, {} buffer(s))",
                 g.prims.len(),
                 g.buffers.len()
             ));
@@ -545,8 +557,10 @@ pub fn dropped(raw: &RawMesh, format: Format) -> Vec<Dropped> {
                 || matches!(p.name.as_str(), "s" | "t")
         }
         Format::Stl => false,
-        // glTF: COLOR_0 (written from the vertex colours)
-        Format::Gltf | Format::Glb => false,
+        // glTF: COLOR_0 (written from the vertex colours, without alpha)
+        Format::Gltf | Format::Glb => {
+            p.meaning() == Meaning::Color && !matches!(p.name.as_str(), "alpha" | "a")
+        }
     };
     for p in a.vertex.iter().filter(|p| !vertex_ok(p)) {
         drop(
@@ -557,13 +571,21 @@ pub fn dropped(raw: &RawMesh, format: Format) -> Vec<Dropped> {
     if raw.colors.is_some() && format == Format::Stl {
         drop("vertex colours".into(), "has no vertex colours");
     }
-    if format != Format::Ply {
-        for p in &a.face {
-            drop(
-                format!("face property {}", p.name),
-                "has no per-face properties",
-            );
-        }
+    // OFF: face colours (`r g b [a]` or a colour map index after the indices)
+    let face_ok = |p: &Property| match format {
+        Format::Ply => true,
+        Format::Off => p.meaning() == Meaning::Color || p.name == "color_index",
+        _ => false,
+    };
+    for p in a.face.iter().filter(|p| !face_ok(p)) {
+        drop(
+            format!("face property {}", p.name),
+            if format == Format::Off {
+                "has no per-face properties other than a colour"
+            } else {
+                "has no per-face properties"
+            },
+        );
     }
     if a.uv.is_some() && matches!(format, Format::Stl | Format::Off) {
         drop(
@@ -719,6 +741,69 @@ fn split_word(s: &str) -> Option<(&str, &str)> {
     }
     let end = s.find(char::is_whitespace).unwrap_or(s.len());
     Some((&s[..end], &s[end..]))
+}
+
+/// An external file a glTF document names: a buffer (read with the mesh) or an image
+/// (travels with it).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct GltfRef {
+    /// The `uri` with its `%XX` escapes decoded (the name the reader opens).
+    pub name: String,
+    pub buffer: bool,
+}
+
+/// The external files a glTF JSON document names (`buffers[].uri`, then
+/// `images[].uri`), in order, each once; `data:` URIs are no files. `Err` when the
+/// bytes are not a JSON object.
+pub fn gltf_external(json: &[u8]) -> Result<Vec<GltfRef>, String> {
+    #[derive(serde::Deserialize)]
+    struct Uri {
+        #[serde(default)]
+        uri: Option<String>,
+    }
+    #[derive(serde::Deserialize)]
+    struct Doc {
+        #[serde(default)]
+        buffers: Vec<Uri>,
+        #[serde(default)]
+        images: Vec<Uri>,
+    }
+    let doc: Doc = serde_json::from_slice(json).map_err(|e| e.to_string())?;
+    let mut out: Vec<GltfRef> = Vec::new();
+    let refs = (doc.buffers.iter().map(|u| (u, true))).chain(doc.images.iter().map(|u| (u, false)));
+    for (u, buffer) in refs {
+        let Some(uri) = u.uri.as_deref() else {
+            continue;
+        };
+        if uri.starts_with("data:") {
+            continue;
+        }
+        let name = percent_decode(uri);
+        if !out.iter().any(|r| r.name == name) {
+            out.push(GltfRef { name, buffer });
+        }
+    }
+    Ok(out)
+}
+
+/// `%20` and the like in a relative URI.
+pub fn percent_decode(s: &str) -> String {
+    let b = s.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        let hex = |c: u8| (c as char).to_digit(16);
+        if b[i] == b'%' && i + 2 < b.len() {
+            if let (Some(h), Some(l)) = (hex(b[i + 1]), hex(b[i + 2])) {
+                out.push((h * 16 + l) as u8);
+                i += 3;
+                continue;
+            }
+        }
+        out.push(b[i]);
+        i += 1;
+    }
+    String::from_utf8_lossy(&out).into_owned()
 }
 
 /// The repair log's `attributes` section.

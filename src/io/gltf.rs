@@ -1,9 +1,12 @@
 //! glTF 2.0: `.gltf` (JSON with its buffers) and `.glb` (binary), parsed and validated
 //! by the `gltf` crate.
 //!
-//! Reading takes the triangle primitives of the document's one mesh (a document with
-//! triangles in several meshes is refused with that reason; points, lines, strips and
-//! fans are kept as they are, not repaired). glTF vertices belong to one primitive and
+//! Reading takes the triangle primitives of every mesh with triangles as one mesh
+//! (points, lines, strips and fans are kept as they are, not repaired). Several such
+//! meshes are read only when they share one frame: every node that places one of them
+//! has the same world transform (equal matrices), so that their vertices are in the same
+//! coordinates; otherwise the document is refused with that reason (moving input
+//! vertices into a common frame would change them). glTF vertices belong to one primitive and
 //! are split at UV and normal seams, so the reader welds the vertices whose positions
 //! are bit-identical into one mesh vertex (in order of first appearance): seams and
 //! primitive borders are not holes. Each glTF vertex's normal and texture coordinate
@@ -25,8 +28,8 @@
 //! written keeps the external names it read (those files travel beside it) and holds
 //! the new stretch as a `data:` URI; a `.glb` holds it in its binary chunk.
 
-use super::attrs::{Corners, GltfExtras, GltfPrim};
-use super::{malformed, Caps, Encoding, IoError, Precision, RawMesh};
+use super::attrs::{percent_decode, Corners, GltfExtras, GltfPrim};
+use super::{malformed, Caps, Encoding, IoError, Precision, RawMesh, Resources};
 use base64::Engine as _;
 use glam::DVec3;
 use serde_json::{json, Value};
@@ -42,7 +45,12 @@ const TRIANGLES: u32 = 4;
 
 /// Reads a `.gltf` or `.glb` held in `bytes` (`path` names it in errors and locates
 /// its external buffers).
-pub(super) fn read(path: &Path, bytes: &[u8], caps: &Caps) -> Result<RawMesh, IoError> {
+pub(super) fn read(
+    path: &Path,
+    bytes: &[u8],
+    caps: &Caps,
+    resources: &Resources,
+) -> Result<RawMesh, IoError> {
     let bad = |m: String| malformed(path, None, m);
     let is_glb = bytes.starts_with(b"glTF");
     if is_glb {
@@ -60,7 +68,7 @@ pub(super) fn read(path: &Path, bytes: &[u8], caps: &Caps) -> Result<RawMesh, Io
     }
     let parsed = std::panic::catch_unwind(|| ::gltf::Gltf::from_slice(bytes))
         .map_err(|_| bad("the glTF document could not be parsed".into()))?;
-    let doc = parsed.map_err(|e| bad(format!("not a valid glTF 2.0 document: {e}")))?;
+    let mut doc = parsed.map_err(|e| bad(format!("not a valid glTF 2.0 document: {e}")))?;
     // the JSON as written, kept for the writer
     let json: Value = if is_glb {
         let glb = ::gltf::binary::Glb::from_slice(bytes).map_err(|e| bad(format!("GLB: {e}")))?;
@@ -70,21 +78,26 @@ pub(super) fn read(path: &Path, bytes: &[u8], caps: &Caps) -> Result<RawMesh, Io
     };
     // every buffer's bytes
     let mut buffers: Vec<Vec<u8>> = Vec::new();
-    let mut glb_bin = None;
+    let mut glb_bin: Option<usize> = None;
+    let mut blob = doc.blob.take();
     for b in doc.buffers() {
         let data = match b.source() {
             ::gltf::buffer::Source::Bin => {
-                glb_bin = Some(b.index());
-                doc.blob.clone().ok_or_else(|| {
+                // the chunk moved into its buffer (a second buffer naming it: a copy)
+                let chunk = match glb_bin.and_then(|k| buffers.get(k)) {
+                    Some(first) => Some(first.clone()),
+                    None => blob.take(),
+                };
+                glb_bin = glb_bin.or(Some(b.index()));
+                chunk.ok_or_else(|| {
                     bad(format!(
                         "buffer {} names a GLB binary chunk the file does not have",
                         b.index()
                     ))
                 })?
             }
-            ::gltf::buffer::Source::Uri(uri) => {
-                load_uri(path, uri).map_err(|m| bad(format!("buffer {}: {m}", b.index())))?
-            }
+            ::gltf::buffer::Source::Uri(uri) => load_uri(path, uri, resources)
+                .map_err(|m| bad(format!("buffer {}: {m}", b.index())))?,
         };
         if data.len() < b.length() {
             return Err(bad(format!(
@@ -96,7 +109,7 @@ pub(super) fn read(path: &Path, bytes: &[u8], caps: &Caps) -> Result<RawMesh, Io
         }
         buffers.push(data);
     }
-    // the one mesh with triangles
+    // the meshes with triangles, in one frame
     let meshes: Vec<_> = doc
         .meshes()
         .filter(|m| {
@@ -104,16 +117,14 @@ pub(super) fn read(path: &Path, bytes: &[u8], caps: &Caps) -> Result<RawMesh, Io
                 .any(|p| p.mode() == ::gltf::mesh::Mode::Triangles)
         })
         .collect();
-    let mesh = match meshes.as_slice() {
-        [m] => m.clone(),
-        [] => return Err(bad("the document has no mesh with triangles".into())),
-        more => {
-            return Err(bad(format!(
-            "the document has triangles in {} meshes; holefill repairs a glTF file with one mesh",
-            more.len()
-        )))
-        }
+    let Some(first_mesh) = meshes.first().map(|m| m.index()) else {
+        return Err(bad("the document has no mesh with triangles".into()));
     };
+    if meshes.len() > 1 {
+        let ids: Vec<usize> = meshes.iter().map(|m| m.index()).collect();
+        one_frame(&doc, &ids).map_err(bad)?;
+    }
+    let several = meshes.len() > 1;
     let mut raw = RawMesh {
         precision: Precision::F32,
         encoding: Encoding::BinaryLittleEndian,
@@ -129,10 +140,18 @@ pub(super) fn read(path: &Path, bytes: &[u8], caps: &Caps) -> Result<RawMesh, Io
     let mut weld: HashMap<[u32; 3], u32> = HashMap::new();
     let (mut any_uv, mut any_normal, mut any_color) = (false, false, false);
     let mut glvert = 0usize; // glTF vertices read so far (uv/normal value index)
-    for p in mesh.primitives() {
+    let all = meshes
+        .iter()
+        .flat_map(|m| m.primitives().map(move |p| (m.index(), p)));
+    for (mesh, p) in all {
+        let of_mesh = if several {
+            format!(" of mesh {mesh}")
+        } else {
+            String::new()
+        };
         if p.mode() != ::gltf::mesh::Mode::Triangles {
             raw.notes.push(format!(
-                "glTF primitive {} ({:?}) kept as it is, not repaired",
+                "glTF primitive {}{of_mesh} ({:?}) kept as it is, not repaired",
                 p.index(),
                 p.mode()
             ));
@@ -140,7 +159,7 @@ pub(super) fn read(path: &Path, bytes: &[u8], caps: &Caps) -> Result<RawMesh, Io
         }
         for a in p.attributes().map(|(_, a)| a).chain(p.indices()) {
             check_accessor(&a, &buffers)
-                .map_err(|m| bad(format!("primitive {}: {m}", p.index())))?;
+                .map_err(|m| bad(format!("primitive {}{of_mesh}: {m}", p.index())))?;
         }
         let reader = p.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
         let pos: Vec<[f32; 3]> = reader
@@ -234,6 +253,7 @@ pub(super) fn read(path: &Path, bytes: &[u8], caps: &Caps) -> Result<RawMesh, Io
             None => n_values.extend(std::iter::repeat_n([0.0; 3], n)),
         }
         prims.push(GltfPrim {
+            mesh,
             index: p.index(),
             first_face,
             faces: corners.len() - first_face,
@@ -269,15 +289,80 @@ pub(super) fn read(path: &Path, bytes: &[u8], caps: &Caps) -> Result<RawMesh, Io
     }
     raw.attrs.gltf = Some(GltfExtras {
         json,
-        buffers,
+        buffers: buffers.into(),
         glb_bin,
-        mesh: mesh.index(),
+        mesh: first_mesh,
         prims,
         corners,
         out_faces: Vec::new(),
         out_prim: Vec::new(),
     });
     Ok(raw)
+}
+
+/// Checks that every node placing one of `meshes` has the same world transform (the
+/// product of its ancestors' and its own matrices); a mesh no node places is taken in
+/// its own coordinates.
+fn one_frame(doc: &::gltf::Document, meshes: &[usize]) -> Result<(), String> {
+    type M4 = [[f32; 4]; 4];
+    let n = doc.nodes().count();
+    let mut parent: Vec<Option<usize>> = vec![None; n];
+    for node in doc.nodes() {
+        for c in node.children() {
+            if let Some(p) = parent.get_mut(c.index()) {
+                *p = Some(node.index());
+            }
+        }
+    }
+    let local: Vec<M4> = doc.nodes().map(|n| n.transform().matrix()).collect();
+    // column-major: m[column][row]
+    let mul = |a: &M4, b: &M4| -> M4 {
+        let mut out = [[0.0f32; 4]; 4];
+        for (c, col) in out.iter_mut().enumerate() {
+            for (r, x) in col.iter_mut().enumerate() {
+                *x = (0..4).map(|k| a[k][r] * b[c][k]).sum();
+            }
+        }
+        out
+    };
+    let world = |i: usize| -> Option<M4> {
+        let mut m = *local.get(i)?;
+        let mut at = i;
+        // a parent chain longer than the nodes is a cycle: no frame
+        for _ in 0..=n {
+            match parent.get(at).copied().flatten() {
+                None => return Some(m),
+                Some(p) => {
+                    m = mul(local.get(p)?, &m);
+                    at = p;
+                }
+            }
+        }
+        None
+    };
+    let mut frame: Option<(usize, M4)> = None;
+    for node in doc.nodes() {
+        let Some(m) = node.mesh().filter(|m| meshes.contains(&m.index())) else {
+            continue;
+        };
+        let w = world(node.index())
+            .ok_or_else(|| format!("node {} is its own ancestor", node.index()))?;
+        match frame {
+            None => frame = Some((node.index(), w)),
+            Some((first, f)) if f != w => {
+                return Err(format!(
+                    "the document has triangles in {} meshes placed in different frames \
+                     (node {first} and node {}, mesh {}, have different transforms); \
+                     holefill repairs several meshes only when they share one frame",
+                    meshes.len(),
+                    node.index(),
+                    m.index()
+                ))
+            }
+            Some(_) => {}
+        }
+    }
+    Ok(())
 }
 
 /// Checks that an accessor's bytes lie inside its buffer view and the view inside its
@@ -323,7 +408,7 @@ fn check_accessor(a: &::gltf::Accessor, buffers: &[Vec<u8>]) -> Result<(), Strin
 }
 
 /// The bytes a buffer URI names: a `data:` URI, or a file beside `path`.
-fn load_uri(path: &Path, uri: &str) -> Result<Vec<u8>, String> {
+fn load_uri(path: &Path, uri: &str, resources: &Resources) -> Result<Vec<u8>, String> {
     if let Some(rest) = uri.strip_prefix("data:") {
         let (_, payload) = rest
             .split_once(";base64,")
@@ -343,28 +428,8 @@ fn load_uri(path: &Path, uri: &str) -> Result<Vec<u8>, String> {
             "{uri:?}: only a name relative to the file (no absolute path, `..` or URL) is read"
         ));
     }
-    let full = path.parent().unwrap_or(Path::new(".")).join(rel);
+    let full = resources.locate(path, rel)?;
     std::fs::read(&full).map_err(|e| format!("cannot read {}: {e}", full.display()))
-}
-
-/// `%20` and the like in a relative URI.
-fn percent_decode(s: &str) -> String {
-    let b = s.as_bytes();
-    let mut out = Vec::with_capacity(b.len());
-    let mut i = 0;
-    while i < b.len() {
-        let hex = |c: u8| (c as char).to_digit(16);
-        if b[i] == b'%' && i + 2 < b.len() {
-            if let (Some(h), Some(l)) = (hex(b[i + 1]), hex(b[i + 2])) {
-                out.push((h * 16 + l) as u8);
-                i += 3;
-                continue;
-            }
-        }
-        out.push(b[i]);
-        i += 1;
-    }
-    String::from_utf8_lossy(&out).into_owned()
 }
 
 /// The new stretch of buffer being written: views and accessors appended to `doc`.
@@ -425,32 +490,45 @@ fn array<'a>(doc: &'a mut Value, key: &str) -> &'a mut Vec<Value> {
 /// Writes `raw` as glTF (`glb`: binary) to `w`.
 pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result<()> {
     // a mesh written as it was read (no repair in between) keeps every triangle
-    let identity: Option<GltfExtras> = raw.attrs.gltf.as_ref().and_then(|g| {
-        (g.out_faces.is_empty() && g.corners.len() == raw.faces.len()).then(|| GltfExtras {
-            out_faces: (0..raw.faces.len() as u32).map(Some).collect(),
-            out_prim: (0..raw.faces.len())
-                .map(|j| g.prim_of(j).unwrap_or(0))
-                .collect(),
-            ..g.clone()
+    let read = raw.attrs.gltf.as_ref();
+    let identity: Option<(Vec<Option<u32>>, Vec<u32>)> = read.and_then(|g| {
+        (g.out_faces.is_empty() && g.corners.len() == raw.faces.len()).then(|| {
+            (
+                (0..raw.faces.len() as u32).map(Some).collect(),
+                (0..raw.faces.len())
+                    .map(|j| g.prim_of(j).unwrap_or(0))
+                    .collect(),
+            )
         })
     });
-    let (mut doc, mut buffers, glb_bin, mesh_index, prims, kept_faces) = match identity
-        .as_ref()
-        .or(raw.attrs.gltf.as_ref())
-    {
-        Some(g) if g.out_faces.len() == raw.faces.len() => {
+    let (out_faces, out_prim): (&[Option<u32>], &[u32]) = match (&identity, read) {
+        (Some((f, p)), _) => (f, p),
+        (None, Some(g)) => (&g.out_faces, &g.out_prim),
+        (None, None) => (&[], &[]),
+    };
+    // the buffers as read are borrowed, never copied
+    type Read<'a> = (
+        Value,
+        &'a [Vec<u8>],
+        Option<usize>,
+        usize,
+        &'a [GltfPrim],
+        Option<(&'a GltfExtras, Vec<bool>)>,
+    );
+    let (mut doc, read_buffers, glb_bin, mesh_index, prims, kept_faces): Read<'_> = match read {
+        Some(g) if out_faces.len() == raw.faces.len() => {
             let mut kept = vec![false; g.corners.len()];
-            for &j in g.out_faces.iter().flatten() {
+            for &j in out_faces.iter().flatten() {
                 if let Some(k) = kept.get_mut(j as usize) {
                     *k = true;
                 }
             }
             (
                 g.json.clone(),
-                g.buffers.clone(),
+                &g.buffers,
                 g.glb_bin,
                 g.mesh,
-                g.prims.clone(),
+                &g.prims,
                 Some((g, kept)),
             )
         }
@@ -462,10 +540,10 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
                 "nodes": [{"mesh": 0}],
                 "meshes": [{"primitives": []}],
             }),
-            Vec::new(),
+            &[],
             None,
             0,
-            Vec::new(),
+            &[],
             None,
         ),
     };
@@ -473,11 +551,11 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
         blob: Vec::new(),
         views: Vec::new(),
     };
-    let mut new_prims: Vec<Value> = Vec::new();
-    let mut emptied: Vec<usize> = Vec::new();
+    let mut new_prims: Vec<(usize, Value)> = Vec::new();
+    let mut emptied: Vec<(usize, usize)> = Vec::new();
     // primitives that lost input faces: a new index accessor
     if let Some((g, kept)) = &kept_faces {
-        for p in &prims {
+        for p in prims {
             let range = p.first_face..p.first_face + p.faces;
             if range.clone().all(|j| kept[j]) {
                 continue;
@@ -487,7 +565,7 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
                 .flat_map(|j| g.corners[j])
                 .collect();
             if idx.is_empty() {
-                emptied.push(p.index);
+                emptied.push((p.mesh, p.index));
                 continue;
             }
             let bytes: Vec<u8> = idx.iter().flat_map(|i| i.to_le_bytes()).collect();
@@ -500,18 +578,18 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
                 ELEMENT_ARRAY_BUFFER,
                 None,
             );
-            doc["meshes"][mesh_index]["primitives"][p.index]["indices"] = json!(a);
+            doc["meshes"][p.mesh]["primitives"][p.index]["indices"] = json!(a);
         }
     }
     // the new faces (every face of a mesh not read from glTF), by target primitive
     let mut groups: Vec<(Option<usize>, Vec<usize>)> = Vec::new();
     for f in 0..raw.faces.len() {
         let target = match &kept_faces {
-            Some((g, _)) => {
-                if g.out_faces.get(f).copied().flatten().is_some() {
+            Some(_) => {
+                if out_faces.get(f).copied().flatten().is_some() {
                     continue;
                 }
-                g.out_prim
+                out_prim
                     .get(f)
                     .map(|&s| s as usize)
                     .filter(|&s| s < prims.len())
@@ -669,33 +747,61 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
         if let Some(m) = tp.and_then(|p| p.material) {
             prim["material"] = json!(m);
         }
-        new_prims.push(prim);
+        new_prims.push((tp.map_or(mesh_index, |p| p.mesh), prim));
     }
+    // each mesh that lost a primitive or gains one
+    let mut touched: Vec<usize> = vec![mesh_index];
+    for m in emptied
+        .iter()
+        .map(|e| e.0)
+        .chain(new_prims.iter().map(|p| p.0))
     {
-        let list = &mut doc["meshes"][mesh_index]["primitives"];
+        if !touched.contains(&m) {
+            touched.push(m);
+        }
+    }
+    for m in touched {
+        let mine: Vec<Value> = new_prims
+            .iter()
+            .filter(|p| p.0 == m)
+            .map(|p| p.1.clone())
+            .collect();
+        let list = &mut doc["meshes"][m]["primitives"];
         if let Value::Array(ps) = list {
             // primitives left with no face go (their accessors stay, unused)
             let mut i = 0;
             ps.retain(|_| {
-                let keep = !emptied.contains(&i);
+                let keep = !emptied.contains(&(m, i));
                 i += 1;
                 keep
             });
-            ps.extend(new_prims);
+            ps.extend(mine);
         } else {
-            *list = Value::Array(new_prims);
+            *list = Value::Array(mine);
         }
     }
-    // where the new stretch lives
-    let mut bin: Option<Vec<u8>> = None;
-    let new_buffer: Option<usize> = if st.blob.is_empty() {
+    // where the new stretch lives; each buffer's bytes: as read (borrowed), zero
+    // padding, and the new stretch (appended to a GLB's binary chunk)
+    let blob = std::mem::take(&mut st.blob);
+    let mut parts: Vec<Part<'_>> = read_buffers
+        .iter()
+        .map(|b| Part {
+            read: b,
+            pad: 0,
+            new: &[],
+        })
+        .collect();
+    let new_buffer: Option<usize> = if blob.is_empty() {
         None
     } else if glb {
         match glb_bin {
             Some(b) => {
-                let base = buffers[b].len().next_multiple_of(4);
-                buffers[b].resize(base, 0);
-                buffers[b].extend_from_slice(&st.blob);
+                let part = parts
+                    .get_mut(b)
+                    .ok_or_else(|| io::Error::other("the GLB binary chunk names no buffer"))?;
+                let base = part.read.len().next_multiple_of(4);
+                part.pad = base - part.read.len();
+                part.new = &blob;
                 for (_, off) in st.views.iter_mut() {
                     *off += base;
                 }
@@ -709,14 +815,25 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
                     }
                 }
                 array(&mut doc, "buffers").insert(0, json!({"byteLength": 0}));
-                buffers.insert(0, std::mem::take(&mut st.blob));
+                parts.insert(
+                    0,
+                    Part {
+                        read: &blob,
+                        pad: 0,
+                        new: &[],
+                    },
+                );
                 Some(0)
             }
         }
     } else {
         array(&mut doc, "buffers").push(json!({"byteLength": 0}));
-        buffers.push(std::mem::take(&mut st.blob));
-        Some(buffers.len() - 1)
+        parts.push(Part {
+            read: &blob,
+            pad: 0,
+            new: &[],
+        });
+        Some(parts.len() - 1)
     };
     if let Some(nb) = new_buffer {
         let views = array(&mut doc, "bufferViews");
@@ -731,9 +848,10 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
     } else {
         None
     };
+    let mut bin: Option<Part<'_>> = None;
     let bufs = array(&mut doc, "buffers");
     for (i, b) in bufs.iter_mut().enumerate() {
-        let Some(data) = buffers.get(i) else { continue };
+        let Some(&data) = parts.get(i) else { continue };
         let from_file = b
             .get("uri")
             .and_then(Value::as_str)
@@ -746,13 +864,16 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
             if let Some(o) = b.as_object_mut() {
                 o.remove("uri");
             }
-            bin = Some(data.clone());
+            bin = Some(data);
         } else if !from_file {
             // the binary chunk of a .glb written as .gltf, and every new stretch
-            b["uri"] = json!(format!(
-                "data:application/octet-stream;base64,{}",
-                base64::engine::general_purpose::STANDARD.encode(data)
-            ));
+            let engine = &base64::engine::general_purpose::STANDARD;
+            let text = if data.pad == 0 && data.new.is_empty() {
+                engine.encode(data.read)
+            } else {
+                engine.encode(data.to_vec())
+            };
+            b["uri"] = json!(format!("data:application/octet-stream;base64,{text}"));
         }
     }
     let text = serde_json::to_vec(&doc).map_err(io::Error::other)?;
@@ -763,18 +884,13 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
     while jchunk.len() % 4 != 0 {
         jchunk.push(b' ');
     }
-    let mut bchunk = bin.unwrap_or_default();
-    while bchunk.len() % 4 != 0 {
-        bchunk.push(0);
-    }
-    let total = 12
-        + 8
-        + jchunk.len()
-        + if bchunk.is_empty() {
-            0
-        } else {
-            8 + bchunk.len()
-        };
+    let bin = bin.unwrap_or(Part {
+        read: &[],
+        pad: 0,
+        new: &[],
+    });
+    let blen = bin.len().next_multiple_of(4);
+    let total = 12 + 8 + jchunk.len() + if blen == 0 { 0 } else { 8 + blen };
     let total =
         u32::try_from(total).map_err(|_| io::Error::other("a GLB file holds at most 4 GiB"))?;
     w.write_all(b"glTF")?;
@@ -783,12 +899,40 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
     w.write_all(&(jchunk.len() as u32).to_le_bytes())?;
     w.write_all(b"JSON")?;
     w.write_all(&jchunk)?;
-    if !bchunk.is_empty() {
-        w.write_all(&(bchunk.len() as u32).to_le_bytes())?;
+    if blen != 0 {
+        w.write_all(&(blen as u32).to_le_bytes())?;
         w.write_all(b"BIN\0")?;
-        w.write_all(&bchunk)?;
+        bin.write(w)?;
+        w.write_all(&[0u8; 3][..blen - bin.len()])?;
     }
     Ok(())
+}
+
+/// A buffer's bytes as written: the bytes read (borrowed), zero padding, the new
+/// stretch.
+#[derive(Clone, Copy)]
+struct Part<'a> {
+    read: &'a [u8],
+    pad: usize,
+    new: &'a [u8],
+}
+
+impl Part<'_> {
+    fn len(&self) -> usize {
+        self.read.len() + self.pad + self.new.len()
+    }
+    fn write<W: Write>(&self, w: &mut W) -> io::Result<()> {
+        w.write_all(self.read)?;
+        w.write_all(&vec![0u8; self.pad])?;
+        w.write_all(self.new)
+    }
+    fn to_vec(self) -> Vec<u8> {
+        let mut v = Vec::with_capacity(self.len());
+        v.extend_from_slice(self.read);
+        v.resize(self.read.len() + self.pad, 0);
+        v.extend_from_slice(self.new);
+        v
+    }
 }
 
 #[cfg(test)]
@@ -848,7 +992,7 @@ mod tests {
         let mut raw = RawMesh::default();
         raw.attrs.gltf = Some(GltfExtras {
             json: doc,
-            buffers: vec![bin],
+            buffers: vec![bin].into(),
             glb_bin: Some(0),
             mesh: 0,
             prims: Vec::new(),
@@ -913,12 +1057,86 @@ mod tests {
             let e = read_mem(&serde_json::to_vec(&doc).unwrap(), Format::Gltf).unwrap_err();
             assert!(e.to_string().contains("relative"), "{uri}: {e}");
         }
-        // two meshes with triangles
+        // two meshes with triangles in different frames; a node its own ancestor
         let mut doc: Value = serde_json::from_slice(&square(false)).unwrap();
         let m = doc["meshes"][0].clone();
         doc["meshes"] = json!([m.clone(), m]);
+        doc["nodes"] = json!([{"mesh": 0}, {"mesh": 1, "translation": [1, 0, 0]}]);
         let e = read_mem(&serde_json::to_vec(&doc).unwrap(), Format::Gltf).unwrap_err();
-        assert!(e.to_string().contains("one mesh"), "{e}");
+        assert!(e.to_string().contains("different frames"), "{e}");
+        doc["nodes"] = json!([{"mesh": 0, "children": [1]}, {"mesh": 1, "children": [0]}]);
+        assert!(read_mem(&serde_json::to_vec(&doc).unwrap(), Format::Gltf).is_err());
+    }
+
+    #[test]
+    fn external_buffers_are_read_from_the_files_given_or_beside() {
+        let d = tempfile::tempdir().unwrap();
+        let mut doc: Value = serde_json::from_slice(&square(false)).unwrap();
+        let uri = doc["buffers"][0]["uri"].as_str().unwrap().to_string();
+        let bin = base64::engine::general_purpose::STANDARD
+            .decode(uri.split_once(";base64,").unwrap().1)
+            .unwrap();
+        doc["buffers"][0]["uri"] = json!("./sq%20a.bin");
+        let gltf = d.path().join("sq.gltf");
+        std::fs::write(&gltf, serde_json::to_vec(&doc).unwrap()).unwrap();
+        let read = |res: &Resources| {
+            crate::io::read_with_resources(&gltf, None, &ReadLimits::default(), res)
+        };
+        // beside the file, by the decoded name
+        std::fs::write(d.path().join("sq a.bin"), &bin).unwrap();
+        let beside = read(&Resources::default()).unwrap();
+        assert_eq!(beside.faces.len(), 2);
+        // only the files given: the one beside is not read
+        let e = read(&Resources {
+            files: Vec::new(),
+            only: true,
+        })
+        .unwrap_err();
+        assert!(e.to_string().contains("not among the files given"), "{e}");
+        std::fs::rename(d.path().join("sq a.bin"), d.path().join("claimed.m0")).unwrap();
+        let given = read(&Resources {
+            files: vec![("sq a.bin".into(), d.path().join("claimed.m0"))],
+            only: true,
+        })
+        .unwrap();
+        assert_eq!(given.positions, beside.positions);
+        // `..` and absolute names are refused before any lookup
+        let mut doc2 = doc.clone();
+        doc2["buffers"][0]["uri"] = json!("../claimed.m0");
+        std::fs::write(&gltf, serde_json::to_vec(&doc2).unwrap()).unwrap();
+        let e = read(&Resources {
+            files: vec![("claimed.m0".into(), d.path().join("claimed.m0"))],
+            only: false,
+        })
+        .unwrap_err();
+        assert!(e.to_string().contains("relative"), "{e}");
+    }
+
+    #[test]
+    fn meshes_sharing_one_frame_read_as_one_and_write_back_unchanged() {
+        let mut doc: Value = serde_json::from_slice(&square(false)).unwrap();
+        let m = doc["meshes"][0].clone();
+        doc["meshes"] = json!([m.clone(), m]);
+        // the same frame: one node with no transform, one with an identity matrix
+        doc["nodes"] =
+            json!([{"mesh": 0}, {"mesh": 1, "matrix": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1]}]);
+        doc["scenes"] = json!([{"nodes": [0, 1]}]);
+        let bytes = serde_json::to_vec(&doc).unwrap();
+        let raw = read_mem(&bytes, Format::Gltf).unwrap();
+        assert_eq!(raw.positions.len(), 4, "welded across the meshes");
+        assert_eq!(raw.faces.len(), 4);
+        let g = raw.attrs.gltf.as_ref().unwrap();
+        assert_eq!(g.prims.iter().map(|p| p.mesh).collect::<Vec<_>>(), [0, 1]);
+        assert!(raw
+            .attrs
+            .names(&raw)
+            .iter()
+            .any(|n| n.contains("mesh 0, 1,")));
+        // written as read: the document unchanged
+        let mut out = Vec::new();
+        write(&mut out, &raw, false).unwrap();
+        let back: Value = serde_json::from_slice(&out).unwrap();
+        assert_eq!(back, doc);
     }
 
     #[test]

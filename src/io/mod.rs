@@ -245,6 +245,51 @@ pub fn read_with_limits(
     format: Option<Format>,
     limits: &ReadLimits,
 ) -> Result<RawMesh, IoError> {
+    read_with_resources(path, format, limits, &Resources::default())
+}
+
+/// Where the reader finds the other files a mesh needs (a glTF document's external
+/// buffers): by default beside the mesh, under the name it gives them.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Resources {
+    /// Files given by the caller: the name a mesh gives (its relative `uri`, `%XX`
+    /// decoded, `./` removed) and the file to read for it.
+    pub files: Vec<(String, PathBuf)>,
+    /// Only `files` are read, never a file beside the mesh (the daemon reads a mesh
+    /// through `/proc/self/fd/0`, beside which nothing may be opened).
+    pub only: bool,
+}
+
+impl Resources {
+    /// The file to read for the relative name `rel` of a mesh at `path`, or why none is.
+    pub(crate) fn locate(&self, path: &Path, rel: &Path) -> Result<PathBuf, String> {
+        let key: Vec<&str> = rel
+            .components()
+            .filter_map(|c| match c {
+                std::path::Component::Normal(n) => n.to_str(),
+                _ => None,
+            })
+            .collect();
+        let key = key.join("/");
+        if let Some((_, p)) = self.files.iter().find(|(n, _)| *n == key) {
+            return Ok(p.clone());
+        }
+        if self.only {
+            return Err(format!(
+                "{key:?} is not among the files given with the mesh"
+            ));
+        }
+        Ok(path.parent().unwrap_or(Path::new(".")).join(rel))
+    }
+}
+
+/// [`read_with_limits`], the files the mesh names looked for as `resources` says.
+pub fn read_with_resources(
+    path: &Path,
+    format: Option<Format>,
+    limits: &ReadLimits,
+    resources: &Resources,
+) -> Result<RawMesh, IoError> {
     let format = resolve_format(path, format)?;
     let file = File::open(path).map_err(|e| io_error(path, e))?;
     let len = file.metadata().map_err(|e| io_error(path, e))?.len();
@@ -259,7 +304,7 @@ pub fn read_with_limits(
         ));
     }
     let reader = BufReader::with_capacity(BUF_CAPACITY, file);
-    read_source(path, reader, len, format, limits)
+    read_source(path, reader, len, format, limits, resources)
 }
 
 /// Reads a mesh from bytes in memory (`path` only names the source in errors).
@@ -282,7 +327,7 @@ pub fn read_bytes(
             ),
         ));
     }
-    read_source(path, bytes, len, format, limits)
+    read_source(path, bytes, len, format, limits, &Resources::default())
 }
 
 fn read_source<R: std::io::BufRead>(
@@ -291,6 +336,7 @@ fn read_source<R: std::io::BufRead>(
     len: u64,
     format: Format,
     limits: &ReadLimits,
+    resources: &Resources,
 ) -> Result<RawMesh, IoError> {
     if len == 0 {
         return Err(malformed(path, None, "empty file"));
@@ -306,7 +352,7 @@ fn read_source<R: std::io::BufRead>(
             let mut bytes = Vec::with_capacity(usize::try_from(len).unwrap_or(0).min(1 << 30));
             std::io::Read::read_to_end(&mut reader, &mut bytes)
                 .map_err(|e| read_error(path, e, "the glTF file"))?;
-            gltf::read(path, &bytes, &caps)?
+            gltf::read(path, &bytes, &caps, resources)?
         }
     };
     check_read(path, &raw)?;

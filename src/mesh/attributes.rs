@@ -102,17 +102,34 @@ pub fn carry(mesh: &Mesh, input: &RawMesh) -> (RawMesh, AttributesReport) {
         });
     }
 
-    // face values
+    // face values; the colour channels chosen together (one face's whole colour)
+    let colour: Vec<&PropData> = a
+        .face
+        .iter()
+        .filter(|p| p.meaning() == Meaning::Color)
+        .map(|p| &p.data)
+        .collect();
+    let colour_key = |j: usize| {
+        colour
+            .iter()
+            .try_fold(0u64, |h, d| Some(h.rotate_left(17) ^ key_of(d, j)?))
+    };
     for p in &a.face {
-        let data = ctx.face_column(&p.data, |j| key_of(&p.data, j));
+        let is_colour = p.meaning() == Meaning::Color;
+        let data = if is_colour {
+            ctx.face_column(&p.data, colour_key)
+        } else {
+            ctx.face_column(&p.data, |j| key_of(&p.data, j))
+        };
         out.attrs.face.push(Property {
             name: p.name.clone(),
             data,
         });
         if new_faces {
             rep.interpolated.push(format!(
-                "face {}: the most common value of the faces around the hole",
-                p.name
+                "face {}: the most common {} of the faces around the hole",
+                p.name,
+                if is_colour { "colour" } else { "value" }
             ));
         }
     }
@@ -137,6 +154,7 @@ pub fn carry(mesh: &Mesh, input: &RawMesh) -> (RawMesh, AttributesReport) {
             mtllibs: o.mtllibs.clone(),
             states: o.states.clone(),
             face_state,
+            byte_colors: o.byte_colors,
         });
     }
     if let Some(s) = a.stl.as_ref().filter(|s| s.attribute.is_empty()) {

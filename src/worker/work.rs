@@ -86,6 +86,7 @@ impl WorkerCtx {
             cores: self.cores,
             hooks: &self.hooks,
             picture: None,
+            resources: &[],
         }
     }
 }

@@ -143,7 +143,7 @@ enum Corner {
 pub(super) struct Piece {
     positions: Vec<DVec3>,
     /// Colours of the vertices with colour, in order.
-    colors: Vec<[f32; 3]>,
+    colors: Vec<[f64; 3]>,
     uncolored: usize,
     faces: Vec<[u32; 3]>,
     /// Corners (`3 * face + k`) holding a relative index, and that index resolved
@@ -307,7 +307,7 @@ impl Piece {
                 }
                 self.uncolored += 1;
             }
-            6 => self.colors.push([a as f32, bb as f32, c as f32]),
+            6 => self.colors.push([a, bb, c]),
             _ => return None,
         }
         self.positions.push(p);

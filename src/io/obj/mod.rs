@@ -24,7 +24,7 @@ mod writer;
 
 pub(crate) use writer::write;
 
-use super::attrs::{Corners, ObjExtras, ObjState};
+use super::attrs::{Corners, ObjExtras, ObjState, PropData, Property, ScalarType, Values};
 use super::text::{has_nul, parse_coord, parse_f64, parse_i64, show, strip_comment, tokens};
 use super::text::{Lines, Next, MAX_LINE};
 use super::{io_error, malformed, unit_color, Caps, IoError, Precision, RawMesh, MAX_ELEMENTS};
@@ -37,7 +37,8 @@ use std::path::Path;
 /// between lines, so that it can take over at any line the parallel reader reached.
 struct State {
     raw: RawMesh,
-    colors: Vec<[f32; 3]>,
+    /// Vertex colours as written (0..1, or 0..255 when any is above 1).
+    colors: Vec<[f64; 3]>,
     uncolored: usize,
     polygons: u64,
     w_scaled: u64,
@@ -213,7 +214,7 @@ fn read_lines<R: BufRead>(
                             // Earlier vertices had no colour: colours are dropped below.
                             colors.resize(raw.positions.len(), [0.0; 3]);
                         }
-                        colors.push([a as f32, b as f32, c as f32]);
+                        colors.push([a, b, c]);
                     }
                     _ => {
                         return Err(bad(format!(
@@ -383,7 +384,7 @@ fn read_lines<R: BufRead>(
 fn finish(path: &Path, st: State) -> Result<RawMesh, IoError> {
     let State {
         mut raw,
-        mut colors,
+        colors,
         uncolored,
         polygons,
         w_scaled,
@@ -425,6 +426,7 @@ fn finish(path: &Path, st: State) -> Result<RawMesh, IoError> {
             mtllibs: std::mem::take(&mut extra.mtllibs),
             states: std::mem::take(&mut extra.states),
             face_state: std::mem::take(&mut extra.face_state),
+            byte_colors: false,
         });
     }
     if extra.partial > 0 {
@@ -453,17 +455,20 @@ fn finish(path: &Path, st: State) -> Result<RawMesh, IoError> {
     }
     if !colors.is_empty() {
         if uncolored == 0 && colors.len() == raw.positions.len() {
-            if colors.iter().flatten().any(|&c| c > 1.0) {
-                for c in colors.iter_mut().flatten() {
-                    *c /= 255.0;
-                }
+            // the file's scale: 0..255 when any component is above 1
+            let bytes = colors.iter().flatten().any(|&c| c as f32 > 1.0);
+            let scale = if bytes { 255.0 } else { 1.0 };
+            raw.colors = Some(
+                colors
+                    .iter()
+                    .map(|c| c.map(|x| unit_color(f64::from(x as f32 / scale))))
+                    .collect(),
+            );
+            if bytes {
                 raw.notes
                     .push("OBJ vertex colours above 1 read as 0..255 and divided by 255".into());
+                byte_colors(&mut raw, &colors);
             }
-            for c in colors.iter_mut().flatten() {
-                *c = unit_color(f64::from(*c));
-            }
-            raw.colors = Some(colors);
         } else {
             raw.notes.push(format!(
                 "OBJ vertex colours dropped: {uncolored} of {} vertices have none",
@@ -487,6 +492,36 @@ fn finish(path: &Path, st: State) -> Result<RawMesh, IoError> {
         ));
     }
     Ok(raw)
+}
+
+/// Vertex colours written 0..255 kept as written: the vertex properties `red green
+/// blue` (`uchar` when every value is an integer in 0..=255, else `double`), which the
+/// writer writes back in place of [`RawMesh::colors`] (new vertices get theirs
+/// interpolated in the same scale).
+fn byte_colors(raw: &mut RawMesh, colors: &[[f64; 3]]) {
+    let bytes = colors
+        .iter()
+        .flatten()
+        .all(|&c| c.fract() == 0.0 && (0.0..=255.0).contains(&c));
+    let ty = if bytes {
+        ScalarType::U8
+    } else {
+        ScalarType::F64
+    };
+    for (k, name) in ["red", "green", "blue"].into_iter().enumerate() {
+        let mut v = Values::new(ty, colors.len());
+        for c in colors {
+            v.push_f64(c[k]);
+        }
+        raw.attrs.vertex.push(Property {
+            name: name.into(),
+            data: PropData::Scalar(v),
+        });
+    }
+    raw.attrs
+        .obj
+        .get_or_insert_with(ObjExtras::default)
+        .byte_colors = true;
 }
 
 /// A `vt`/`vn` index of a face corner (1-based, or negative: relative to the

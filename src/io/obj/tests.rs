@@ -36,6 +36,46 @@ fn vertex_colours_and_order_kept() {
 }
 
 #[test]
+fn byte_colours_are_written_back_as_read() {
+    let text = "v 0 0 0 255 128 0\nv 1 0 0 10 20 30\nv 0 1 0 0 0 0\nf 1 2 3\n";
+    let m = parse(text).unwrap();
+    // the 0..1 colours for other formats, the values as written for OBJ
+    assert_eq!(m.colors.as_ref().unwrap()[0], [1.0, 128.0 / 255.0, 0.0]);
+    assert!(m.attrs.obj.as_ref().unwrap().byte_colors);
+    assert_eq!(m.attrs.vertex.len(), 3);
+    assert!(matches!(
+        m.attrs.vertex[0].data,
+        PropData::Scalar(Values::U8(_))
+    ));
+    let mut out = Vec::new();
+    write(&mut out, &m).unwrap();
+    let out = String::from_utf8(out).unwrap();
+    let v: Vec<&str> = out.lines().filter(|l| l.starts_with("v ")).collect();
+    assert_eq!(v, text.lines().take(3).collect::<Vec<_>>());
+    let back = parse(&out).unwrap();
+    assert_eq!(back.colors, m.colors);
+    assert_eq!(back.attrs, m.attrs);
+    // reals above 1 keep their text (stored as double)
+    let m = parse("v 0 0 0 127.5 0 3\nv 1 0 0 1 2 3\nv 0 1 0 0 0 0\nf 1 2 3\n").unwrap();
+    assert!(matches!(
+        m.attrs.vertex[0].data,
+        PropData::Scalar(Values::F64(_))
+    ));
+    let mut out = Vec::new();
+    write(&mut out, &m).unwrap();
+    let out = String::from_utf8(out).unwrap();
+    assert!(out.lines().any(|l| l == "v 0 0 0 127.5 0 3"), "{out}");
+    // 0..1 colours stay as they were: no properties, written as reals
+    let m = parse("v 0 0 0 1 0.5 0\nv 1 0 0 0 0 1\nv 0 1 0 0 1 0\nf 1 2 3\n").unwrap();
+    assert!(m.attrs.vertex.is_empty() && m.attrs.obj.is_none());
+    let mut out = Vec::new();
+    write(&mut out, &m).unwrap();
+    assert!(String::from_utf8(out)
+        .unwrap()
+        .contains("v 0 0 0 1 0.5 0\n"));
+}
+
+#[test]
 fn forward_reference_is_allowed_but_range_checked() {
     assert!(parse("f 1 2 3\nv 0 0 0\nv 1 0 0\nv 0 1 0\n").is_ok());
     let e = parse("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n").unwrap_err();

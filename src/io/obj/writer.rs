@@ -1,10 +1,11 @@
 //! The OBJ writer.
 
-use crate::io::attrs::ObjState;
+use crate::io::attrs::{ObjState, PropData, Values};
 use crate::io::{Precision, RawMesh};
 use std::io::Write;
 
-/// Writes an OBJ file: `mtllib`, `v x y z [r g b]`, `vt`, `vn`, the face states
+/// Writes an OBJ file: `mtllib`, `v x y z [r g b]` (colours read as 0..255 as they
+/// were written), `vt`, `vn`, the face states
 /// (`o`, `g`, `usemtl`, `s` where they change) and `f a[/t][/n] ...` (1-based).
 pub(crate) fn write<W: Write>(w: &mut W, raw: &RawMesh) -> std::io::Result<()> {
     let f32 = raw.precision == Precision::F32;
@@ -20,7 +21,14 @@ pub(crate) fn write<W: Write>(w: &mut W, raw: &RawMesh) -> std::io::Result<()> {
             writeln!(w, "mtllib {}", one_line(m))?;
         }
     }
-    let colors = raw.colors.as_deref();
+    // colours read as 0..255 go back as written (new vertices: interpolated in that scale)
+    let bytes: Option<[&Values; 3]> = a
+        .obj
+        .as_ref()
+        .filter(|o| o.byte_colors)
+        .and_then(|_| Some([prop(raw, "red")?, prop(raw, "green")?, prop(raw, "blue")?]))
+        .filter(|c| c.iter().all(|v| v.len() == raw.positions.len()));
+    let colors = raw.colors.as_deref().filter(|_| bytes.is_none());
     for (i, p) in raw.positions.iter().enumerate() {
         w.write_all(b"v ")?;
         crate::io::write_real(w, p.x, f32)?;
@@ -30,6 +38,15 @@ pub(crate) fn write<W: Write>(w: &mut W, raw: &RawMesh) -> std::io::Result<()> {
         crate::io::write_real(w, p.z, f32)?;
         if let Some(c) = colors.and_then(|c| c.get(i)) {
             write!(w, " {} {} {}", c[0], c[1], c[2])?;
+        }
+        for v in bytes.iter().flatten() {
+            let x = v.get(i).unwrap_or(0.0);
+            w.write_all(b" ")?;
+            if v.ty().is_int() {
+                write!(w, "{}", x as i64)?;
+            } else {
+                crate::io::write_real(w, x, false)?;
+            }
         }
         w.write_all(b"\n")?;
     }
@@ -98,6 +115,14 @@ pub(crate) fn write<W: Write>(w: &mut W, raw: &RawMesh) -> std::io::Result<()> {
         w.write_all(b"\n")?;
     }
     Ok(())
+}
+
+/// The scalar vertex property `name`.
+fn prop<'a>(raw: &'a RawMesh, name: &str) -> Option<&'a Values> {
+    raw.attrs.vertex.iter().find_map(|p| match &p.data {
+        PropData::Scalar(v) if p.name == name => Some(v),
+        _ => None,
+    })
 }
 
 /// A name on one line (a line break inside would start a record of its own).
