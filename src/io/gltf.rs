@@ -1137,6 +1137,17 @@ mod tests {
         write(&mut out, &raw, false).unwrap();
         let back: Value = serde_json::from_slice(&out).unwrap();
         assert_eq!(back, doc);
+        // world transforms: a parent's translation counts; equal products are one frame
+        doc["nodes"] = json!([
+            {"translation": [1, 0, 0], "children": [1]},
+            {"mesh": 0},
+            {"mesh": 1, "translation": [1, 0, 0]}
+        ]);
+        doc["scenes"] = json!([{"nodes": [0, 2]}]);
+        assert!(read_mem(&serde_json::to_vec(&doc).unwrap(), Format::Gltf).is_ok());
+        doc["nodes"][0]["translation"] = json!([2, 0, 0]);
+        let e = read_mem(&serde_json::to_vec(&doc).unwrap(), Format::Gltf).unwrap_err();
+        assert!(e.to_string().contains("node 1 and node 2"), "{e}");
     }
 
     #[test]
