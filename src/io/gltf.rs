@@ -760,6 +760,7 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
             touched.push(m);
         }
     }
+    let mut gone: Vec<usize> = Vec::new();
     for m in touched {
         let mine: Vec<Value> = new_prims
             .iter()
@@ -776,10 +777,14 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
                 keep
             });
             ps.extend(mine);
+            if ps.is_empty() {
+                gone.push(m);
+            }
         } else {
             *list = Value::Array(mine);
         }
     }
+    drop_meshes(&mut doc, gone);
     // where the new stretch lives; each buffer's bytes: as read (borrowed), zero
     // padding, and the new stretch (appended to a GLB's binary chunk)
     let blob = std::mem::take(&mut st.blob);
@@ -906,6 +911,36 @@ pub(super) fn write<W: Write>(w: &mut W, raw: &RawMesh, glb: bool) -> io::Result
         w.write_all(&[0u8; 3][..blen - bin.len()])?;
     }
     Ok(())
+}
+
+/// Removes the meshes `gone` (left with no primitive: glTF requires one) from the
+/// document: the nodes that placed them lose their `mesh`, later meshes' indices move
+/// down.
+fn drop_meshes(doc: &mut Value, mut gone: Vec<usize>) {
+    if gone.is_empty() {
+        return;
+    }
+    gone.sort_unstable();
+    gone.dedup();
+    let meshes = array(doc, "meshes");
+    for &m in gone.iter().rev() {
+        if m < meshes.len() {
+            meshes.remove(m);
+        }
+    }
+    for node in array(doc, "nodes").iter_mut() {
+        let Some(k) = node.get("mesh").and_then(Value::as_u64) else {
+            continue;
+        };
+        let k = k as usize;
+        if gone.contains(&k) {
+            if let Some(o) = node.as_object_mut() {
+                o.remove("mesh");
+            }
+        } else {
+            node["mesh"] = json!(k - gone.iter().filter(|&&g| g < k).count());
+        }
+    }
 }
 
 /// A buffer's bytes as written: the bytes read (borrowed), zero padding, the new
@@ -1137,6 +1172,32 @@ mod tests {
         write(&mut out, &raw, false).unwrap();
         let back: Value = serde_json::from_slice(&out).unwrap();
         assert_eq!(back, doc);
+        // a mesh whose every face went (debris) goes, and so does its node's reference
+        let mut cut = raw.clone();
+        cut.faces.truncate(2);
+        let g = cut.attrs.gltf.as_mut().unwrap();
+        g.out_faces = vec![Some(0), Some(1)];
+        g.out_prim = vec![0, 0];
+        let mut out = Vec::new();
+        write(&mut out, &cut, false).unwrap();
+        let back: Value = serde_json::from_slice(&out).unwrap();
+        assert_eq!(back["meshes"].as_array().unwrap().len(), 1, "{back}");
+        assert_eq!(
+            back["nodes"],
+            json!([{"mesh": 0}, {"matrix": doc["nodes"][1]["matrix"]}])
+        );
+        assert_eq!(read_mem(&out, Format::Gltf).unwrap().faces.len(), 2);
+        // world transforms: a parent's translation counts; equal products are one frame
+        doc["nodes"] = json!([
+            {"translation": [1, 0, 0], "children": [1]},
+            {"mesh": 0},
+            {"mesh": 1, "translation": [1, 0, 0]}
+        ]);
+        doc["scenes"] = json!([{"nodes": [0, 2]}]);
+        assert!(read_mem(&serde_json::to_vec(&doc).unwrap(), Format::Gltf).is_ok());
+        doc["nodes"][0]["translation"] = json!([2, 0, 0]);
+        let e = read_mem(&serde_json::to_vec(&doc).unwrap(), Format::Gltf).unwrap_err();
+        assert!(e.to_string().contains("node 1 and node 2"), "{e}");
     }
 
     #[test]

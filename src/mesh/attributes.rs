@@ -101,6 +101,28 @@ pub fn carry(mesh: &Mesh, input: &RawMesh) -> (RawMesh, AttributesReport) {
             data,
         });
     }
+    // OBJ colours kept 0..255: a new vertex's 0..1 colour is that of its (rounded)
+    // 0..255 values, as reading the written file gives
+    if new_vertices && a.obj.as_ref().is_some_and(|o| o.byte_colors) {
+        let RawMesh { attrs, colors, .. } = &mut out;
+        let find = |name: &str| {
+            attrs.vertex.iter().find_map(|p| match &p.data {
+                PropData::Scalar(v) if p.name == name => Some(v),
+                _ => None,
+            })
+        };
+        if let (Some(r), Some(g), Some(b), Some(cs)) =
+            (find("red"), find("green"), find("blue"), colors.as_mut())
+        {
+            for (v, c) in cs.iter_mut().enumerate() {
+                if ctx.src.get(v).copied().flatten().is_none() {
+                    *c = [r, g, b].map(|ch| {
+                        crate::io::unit_color(f64::from(ch.get(v).unwrap_or(0.0) as f32 / 255.0))
+                    });
+                }
+            }
+        }
+    }
 
     // face values; the colour channels chosen together (one face's whole colour)
     let colour: Vec<&PropData> = a
