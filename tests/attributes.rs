@@ -814,6 +814,58 @@ fn obj_byte_colours_come_back_as_written_and_new_vertices_in_the_same_scale() {
         .any(|s| s.starts_with("vertex red")));
 }
 
+#[test]
+fn obj_unit_colours_with_more_digits_than_f32_come_back_as_written() {
+    // red and green linear in x and y with every digit of an f64, blue constant
+    let obj = |s: &Soup| {
+        let mut t = String::new();
+        for p in &s.v {
+            let (r, g) = (0.1 + 0.031 * p[0], 0.2 + 0.029 * p[1]);
+            writeln!(t, "v {} {} {} {r} {g} 0.7", p[0], p[1], p[2]).unwrap();
+        }
+        for f in &s.f {
+            writeln!(t, "f {} {} {}", f[0] + 1, f[1] + 1, f[2] + 1).unwrap();
+        }
+        t
+    };
+    let vlines = |t: &str| -> Vec<String> {
+        t.lines()
+            .filter(|l| l.starts_with("v "))
+            .map(str::to_string)
+            .collect()
+    };
+    let dir = tempdir();
+    let (s, _) = cut(&grid_soup(20), [10.0, 10.0, 0.0], 4.0);
+    let holed = obj(&s);
+    let src = dir.path().join("holed.obj");
+    std::fs::write(&src, &holed).unwrap();
+    let raw = io::read(&src, None).unwrap();
+    let (out, report) = repair(&raw);
+    assert!(report.summary.filled >= 1);
+    let nv = raw.positions.len();
+    let dst = dir.path().join("out.obj");
+    io::write(&dst, &out, None).unwrap();
+    let text = std::fs::read_to_string(&dst).unwrap();
+    let (a, b) = (vlines(&holed), vlines(&text));
+    assert_eq!(b.len(), out.positions.len());
+    assert!(b.len() > nv);
+    assert_eq!(a[..], b[..nv], "input vertices' lines as written");
+    for (v, line) in b.iter().enumerate().skip(nv) {
+        let t: Vec<f64> = line
+            .split_whitespace()
+            .skip(1)
+            .map(|x| x.parse().unwrap())
+            .collect();
+        let p = out.positions[v];
+        assert!((t[3] - (0.1 + 0.031 * p.x)).abs() <= 1e-3, "{line}");
+        assert!((t[4] - (0.2 + 0.029 * p.y)).abs() <= 1e-3, "{line}");
+        assert!((t[5] - 0.7).abs() <= 1e-9, "{line}");
+    }
+    let back = io::read(&dst, None).unwrap();
+    assert_eq!(back.attrs, out.attrs);
+    assert_eq!(back.colors, out.colors);
+}
+
 /// OFF text of a soup with a colour `r g b a` on every face (the writer's layout).
 fn face_coloured_off(s: &Soup, colour: impl Fn(usize, &[usize; 3]) -> [u8; 4]) -> String {
     let mut t = format!("OFF\n{} {} 0\n", s.v.len(), s.f.len());

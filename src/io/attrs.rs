@@ -296,6 +296,10 @@ pub struct ObjExtras {
     /// The vertex colours were written 0..255 (`v x y z 255 128 0`): the vertex
     /// properties `red green blue` hold them as written and the writer writes those.
     pub byte_colors: bool,
+    /// The vertex colours were written 0..1 with more digits than an f32 keeps
+    /// (`v x y z 0.123456789 ...`): the vertex properties `red green blue` (double)
+    /// hold them as written and the writer writes those.
+    pub exact_colors: bool,
 }
 
 /// PLY extras: header lines and the elements other than vertex and face.

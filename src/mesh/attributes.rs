@@ -101,9 +101,13 @@ pub fn carry(mesh: &Mesh, input: &RawMesh) -> (RawMesh, AttributesReport) {
             data,
         });
     }
-    // OBJ colours kept 0..255: a new vertex's 0..1 colour is that of its (rounded)
-    // 0..255 values, as reading the written file gives
-    if new_vertices && a.obj.as_ref().is_some_and(|o| o.byte_colors) {
+    // OBJ colours kept as written: a new vertex's 0..1 colour is that of its values
+    // (0..255 ones rounded), as reading the written file gives
+    let kept = a.obj.as_ref().filter(|o| o.byte_colors || o.exact_colors);
+    if let Some(scale) = kept
+        .filter(|_| new_vertices)
+        .map(|o| if o.byte_colors { 255.0 } else { 1.0 })
+    {
         let RawMesh { attrs, colors, .. } = &mut out;
         let find = |name: &str| {
             attrs.vertex.iter().find_map(|p| match &p.data {
@@ -117,7 +121,7 @@ pub fn carry(mesh: &Mesh, input: &RawMesh) -> (RawMesh, AttributesReport) {
             for (v, c) in cs.iter_mut().enumerate() {
                 if ctx.src.get(v).copied().flatten().is_none() {
                     *c = [r, g, b].map(|ch| {
-                        crate::io::unit_color(f64::from(ch.get(v).unwrap_or(0.0) as f32 / 255.0))
+                        crate::io::unit_color(f64::from(ch.get(v).unwrap_or(0.0) as f32 / scale))
                     });
                 }
             }
@@ -177,6 +181,7 @@ pub fn carry(mesh: &Mesh, input: &RawMesh) -> (RawMesh, AttributesReport) {
             states: o.states.clone(),
             face_state,
             byte_colors: o.byte_colors,
+            exact_colors: o.exact_colors,
         });
     }
     if let Some(s) = a.stl.as_ref().filter(|s| s.attribute.is_empty()) {

@@ -427,6 +427,7 @@ fn finish(path: &Path, st: State) -> Result<RawMesh, IoError> {
             states: std::mem::take(&mut extra.states),
             face_state: std::mem::take(&mut extra.face_state),
             byte_colors: false,
+            exact_colors: false,
         });
     }
     if extra.partial > 0 {
@@ -467,7 +468,10 @@ fn finish(path: &Path, st: State) -> Result<RawMesh, IoError> {
             if bytes {
                 raw.notes
                     .push("OBJ vertex colours above 1 read as 0..255 and divided by 255".into());
-                byte_colors(&mut raw, &colors);
+                byte_colors(&mut raw, &colors, true);
+            } else if colors.iter().flatten().any(|&c| f64::from(c as f32) != c) {
+                // more digits than the f32 colours keep: the values as written
+                byte_colors(&mut raw, &colors, false);
             }
         } else {
             raw.notes.push(format!(
@@ -494,15 +498,17 @@ fn finish(path: &Path, st: State) -> Result<RawMesh, IoError> {
     Ok(raw)
 }
 
-/// Vertex colours written 0..255 kept as written: the vertex properties `red green
-/// blue` (`uchar` when every value is an integer in 0..=255, else `double`), which the
-/// writer writes back in place of [`RawMesh::colors`] (new vertices get theirs
-/// interpolated in the same scale).
-fn byte_colors(raw: &mut RawMesh, colors: &[[f64; 3]]) {
-    let bytes = colors
-        .iter()
-        .flatten()
-        .all(|&c| c.fract() == 0.0 && (0.0..=255.0).contains(&c));
+/// Vertex colours kept as written, 0..255 (`scale255`) or 0..1 with more digits than
+/// an f32 keeps: the vertex properties `red green blue` (`uchar` when written 0..255
+/// and every value is an integer in 0..=255, else `double`), which the writer writes
+/// back in place of [`RawMesh::colors`] (new vertices get theirs interpolated in the
+/// same scale).
+fn byte_colors(raw: &mut RawMesh, colors: &[[f64; 3]], scale255: bool) {
+    let bytes = scale255
+        && colors
+            .iter()
+            .flatten()
+            .all(|&c| c.fract() == 0.0 && (0.0..=255.0).contains(&c));
     let ty = if bytes {
         ScalarType::U8
     } else {
@@ -518,10 +524,12 @@ fn byte_colors(raw: &mut RawMesh, colors: &[[f64; 3]]) {
             data: PropData::Scalar(v),
         });
     }
-    raw.attrs
-        .obj
-        .get_or_insert_with(ObjExtras::default)
-        .byte_colors = true;
+    let o = raw.attrs.obj.get_or_insert_with(ObjExtras::default);
+    if scale255 {
+        o.byte_colors = true;
+    } else {
+        o.exact_colors = true;
+    }
 }
 
 /// A `vt`/`vn` index of a face corner (1-based, or negative: relative to the

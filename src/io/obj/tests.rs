@@ -36,6 +36,31 @@ fn vertex_colours_and_order_kept() {
 }
 
 #[test]
+fn unit_colours_with_more_digits_than_f32_are_written_back_as_read() {
+    let text =
+        "v 0 0 0 0.123456789 0.5 0.25\nv 1 0 0 0.1 0.2 0.3\nv 0 1 0 0 1 0.987654321\nf 1 2 3\n";
+    let m = parse(text).unwrap();
+    let o = m.attrs.obj.as_ref().unwrap();
+    assert!(o.exact_colors && !o.byte_colors);
+    assert!(matches!(
+        m.attrs.vertex[0].data,
+        PropData::Scalar(Values::F64(_))
+    ));
+    assert_eq!(m.colors.as_ref().unwrap()[0][0], 0.123456789f32);
+    let mut out = Vec::new();
+    write(&mut out, &m).unwrap();
+    let out = String::from_utf8(out).unwrap();
+    let v: Vec<&str> = out.lines().filter(|l| l.starts_with("v ")).collect();
+    assert_eq!(v, text.lines().take(3).collect::<Vec<_>>());
+    let back = parse(&out).unwrap();
+    assert_eq!(back.colors, m.colors);
+    assert_eq!(back.attrs, m.attrs);
+    // colours an f32 keeps exactly stay plain 0..1 colours
+    let m = parse("v 0 0 0 0.5 0.25 1\nv 1 0 0 0 0 0\nv 0 1 0 1 1 1\nf 1 2 3\n").unwrap();
+    assert!(m.attrs.obj.is_none() && m.attrs.vertex.is_empty());
+}
+
+#[test]
 fn byte_colours_are_written_back_as_read() {
     let text = "v 0 0 0 255 128 0\nv 1 0 0 10 20 30\nv 0 1 0 0 0 0\nf 1 2 3\n";
     let m = parse(text).unwrap();

@@ -4,8 +4,8 @@ use crate::io::attrs::{ObjState, PropData, Values};
 use crate::io::{Precision, RawMesh};
 use std::io::Write;
 
-/// Writes an OBJ file: `mtllib`, `v x y z [r g b]` (colours read as 0..255 as they
-/// were written), `vt`, `vn`, the face states
+/// Writes an OBJ file: `mtllib`, `v x y z [r g b]` (colours read as 0..255, or 0..1
+/// with more digits than an f32 keeps, as they were written), `vt`, `vn`, the face states
 /// (`o`, `g`, `usemtl`, `s` where they change) and `f a[/t][/n] ...` (1-based).
 pub(crate) fn write<W: Write>(w: &mut W, raw: &RawMesh) -> std::io::Result<()> {
     let f32 = raw.precision == Precision::F32;
@@ -21,11 +21,12 @@ pub(crate) fn write<W: Write>(w: &mut W, raw: &RawMesh) -> std::io::Result<()> {
             writeln!(w, "mtllib {}", one_line(m))?;
         }
     }
-    // colours read as 0..255 go back as written (new vertices: interpolated in that scale)
+    // colours read as 0..255, or 0..1 with more digits than f32 keeps, go back as
+    // written (new vertices: interpolated in that scale)
     let bytes: Option<[&Values; 3]> = a
         .obj
         .as_ref()
-        .filter(|o| o.byte_colors)
+        .filter(|o| o.byte_colors || o.exact_colors)
         .and_then(|_| Some([prop(raw, "red")?, prop(raw, "green")?, prop(raw, "blue")?]))
         .filter(|c| c.iter().all(|v| v.len() == raw.positions.len()));
     let colors = raw.colors.as_deref().filter(|_| bytes.is_none());
