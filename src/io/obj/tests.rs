@@ -35,6 +35,19 @@ fn vertex_colours_and_order_kept() {
     assert_eq!(m.colors.unwrap()[1], [0.0, 1.0, 0.0]);
 }
 
+/// Writes `m` (read from `text`, three vertices): its `v` lines are those of `text`,
+/// and reading it back gives the same colours and attributes.
+fn vertex_lines_round_trip(text: &str, m: &RawMesh) {
+    let mut out = Vec::new();
+    write(&mut out, m).unwrap();
+    let out = String::from_utf8(out).unwrap();
+    let v: Vec<&str> = out.lines().filter(|l| l.starts_with("v ")).collect();
+    assert_eq!(v, text.lines().take(3).collect::<Vec<_>>());
+    let back = parse(&out).unwrap();
+    assert_eq!(back.colors, m.colors);
+    assert_eq!(back.attrs, m.attrs);
+}
+
 #[test]
 fn unit_colours_with_more_digits_than_f32_are_written_back_as_read() {
     let text =
@@ -47,14 +60,7 @@ fn unit_colours_with_more_digits_than_f32_are_written_back_as_read() {
         PropData::Scalar(Values::F64(_))
     ));
     assert_eq!(m.colors.as_ref().unwrap()[0][0], 0.123456789f32);
-    let mut out = Vec::new();
-    write(&mut out, &m).unwrap();
-    let out = String::from_utf8(out).unwrap();
-    let v: Vec<&str> = out.lines().filter(|l| l.starts_with("v ")).collect();
-    assert_eq!(v, text.lines().take(3).collect::<Vec<_>>());
-    let back = parse(&out).unwrap();
-    assert_eq!(back.colors, m.colors);
-    assert_eq!(back.attrs, m.attrs);
+    vertex_lines_round_trip(text, &m);
     // colours an f32 keeps exactly stay plain 0..1 colours
     let m = parse("v 0 0 0 0.5 0.25 1\nv 1 0 0 0 0 0\nv 0 1 0 1 1 1\nf 1 2 3\n").unwrap();
     assert!(m.attrs.obj.is_none() && m.attrs.vertex.is_empty());
@@ -72,14 +78,7 @@ fn byte_colours_are_written_back_as_read() {
         m.attrs.vertex[0].data,
         PropData::Scalar(Values::U8(_))
     ));
-    let mut out = Vec::new();
-    write(&mut out, &m).unwrap();
-    let out = String::from_utf8(out).unwrap();
-    let v: Vec<&str> = out.lines().filter(|l| l.starts_with("v ")).collect();
-    assert_eq!(v, text.lines().take(3).collect::<Vec<_>>());
-    let back = parse(&out).unwrap();
-    assert_eq!(back.colors, m.colors);
-    assert_eq!(back.attrs, m.attrs);
+    vertex_lines_round_trip(text, &m);
     // reals above 1 keep their text (stored as double)
     let m = parse("v 0 0 0 127.5 0 3\nv 1 0 0 1 2 3\nv 0 1 0 0 0 0\nf 1 2 3\n").unwrap();
     assert!(matches!(
