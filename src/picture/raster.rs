@@ -116,8 +116,8 @@ impl Panel {
                         hi = hi.min(-r * ia + 1.0);
                     }
                 }
-                if !(lo <= hi) {
-                    continue;
+                if lo.partial_cmp(&hi).is_none_or(|o| o.is_gt()) {
+                    continue; // empty, or NaN
                 }
                 // lo >= px0 + 0.5 >= 0.5: truncation is floor
                 sx0 = ((lo - 0.5) as usize).max(px0);
@@ -230,8 +230,8 @@ impl Panel {
 /// The smallest index `i >= 0` with `i as f32 >= v` (0 for NaN).
 #[inline]
 fn ceil_index(v: f32) -> usize {
-    if !(v > 0.0) {
-        return 0;
+    if v.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+        return 0; // at most 0, or NaN
     }
     let t = v as usize; // truncation (saturating)
     t + usize::from((t as f32) < v)

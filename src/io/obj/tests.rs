@@ -59,7 +59,7 @@ fn unit_colours_with_more_digits_than_f32_are_written_back_as_read() {
         m.attrs.vertex[0].data,
         PropData::Scalar(Values::F64(_))
     ));
-    assert_eq!(m.colors.as_ref().unwrap()[0][0], 0.123456789f32);
+    assert_eq!(m.colors.as_ref().unwrap()[0][0], 0.123456789f64 as f32);
     vertex_lines_round_trip(text, &m);
     // colours an f32 keeps exactly stay plain 0..1 colours
     let m = parse("v 0 0 0 0.5 0.25 1\nv 1 0 0 0 0 0\nv 0 1 0 1 1 1\nf 1 2 3\n").unwrap();
