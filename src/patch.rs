@@ -4,7 +4,7 @@
 
 use crate::mesh::{Mesh, TopologyError, VertexId};
 use crate::policy::Policy;
-use crate::report::HoleClass;
+use crate::report::{HoleClass, HoleReport, HoleStatus};
 use glam::DVec3;
 
 /// A boundary loop to fill.
@@ -24,6 +24,29 @@ pub struct Hole {
 }
 
 impl Hole {
+    /// The log entry of this hole with `status` and `reason`, before any method is
+    /// tried: nothing added or removed, no quality, no time.
+    pub fn report(&self, status: HoleStatus, reason: String) -> HoleReport {
+        HoleReport {
+            id: self.id,
+            boundary_vertices: self.len(),
+            perimeter: self.perimeter,
+            mean_edge_length: self.mean_edge_length,
+            class: self.class,
+            method: None,
+            tried: Vec::new(),
+            status,
+            reason,
+            added_vertices: 0,
+            added_faces: 0,
+            rim_faces_removed: 0,
+            island_faces_removed: 0,
+            islands_bridged: 0,
+            quality: None,
+            ms: 0.0,
+        }
+    }
+
     /// Measures a loop.
     pub fn new(id: usize, mesh: &Mesh, vertices: Vec<VertexId>, policy: &Policy) -> Hole {
         let k = vertices.len();

@@ -57,30 +57,16 @@ pub fn repair(raw: &RawMesh, policy: &Policy) -> Result<(RawMesh, RepairReport),
             report.resolved.stitched_faces = s.faces_changed;
             for (lp, merged) in s.closed {
                 let hole = Hole::new(0, &mesh, lp, policy);
-                stitched.push(HoleReport {
-                    id: 0,
-                    boundary_vertices: hole.len(),
-                    perimeter: hole.perimeter,
-                    mean_edge_length: hole.mean_edge_length,
-                    class: hole.class,
-                    method: None,
-                    tried: Vec::new(),
-                    status: HoleStatus::Stitched,
-                    reason: format!(
+                stitched.push(hole.report(
+                    HoleStatus::Stitched,
+                    format!(
                         "a crack: {merged} of its {} vertices coincide with boundary vertices \
                          across it (crack.tolerance = {} of the local edge length) and were \
                          identified with them; no faces added",
                         hole.len(),
                         policy.crack.tolerance
                     ),
-                    added_vertices: 0,
-                    added_faces: 0,
-                    rim_faces_removed: 0,
-                    island_faces_removed: 0,
-                    islands_bridged: 0,
-                    quality: None,
-                    ms: 0.0,
-                });
+                ));
                 stitched_loops.push(hole.vertices);
             }
             mesh = s.mesh;
@@ -227,24 +213,7 @@ fn fill_all(
         // patches are appended to the faces, one hole after the other
         let first_face = mesh.num_faces() as u32;
         match (rule, proposal) {
-            (Some(rule), _) => out.push(HoleReport {
-                id: hole.id,
-                boundary_vertices: hole.len(),
-                perimeter: hole.perimeter,
-                mean_edge_length: hole.mean_edge_length,
-                class: hole.class,
-                method: None,
-                tried: Vec::new(),
-                status: HoleStatus::Skipped,
-                reason: rule,
-                added_vertices: 0,
-                added_faces: 0,
-                rim_faces_removed: 0,
-                island_faces_removed: 0,
-                islands_bridged: 0,
-                quality: None,
-                ms: 0.0,
-            }),
+            (Some(rule), _) => out.push(hole.report(HoleStatus::Skipped, rule)),
             (None, Some(p)) => out.push(dispatch::finish_hole(mesh, hole, policy, &mut checker, p)),
             (None, None) => out.push(dispatch::fill_hole(mesh, hole, policy, &mut checker)),
         }

@@ -181,22 +181,8 @@ pub fn finish_hole(
 ) -> HoleReport {
     let t0 = Instant::now();
     let mut rep = HoleReport {
-        id: hole.id,
-        boundary_vertices: hole.len(),
-        perimeter: hole.perimeter,
-        mean_edge_length: hole.mean_edge_length,
-        class: hole.class,
-        method: None,
         tried: proposal.tried,
-        status: HoleStatus::Failed,
-        reason: String::new(),
-        added_vertices: 0,
-        added_faces: 0,
-        rim_faces_removed: 0,
-        island_faces_removed: 0,
-        islands_bridged: 0,
-        quality: None,
-        ms: 0.0,
+        ..hole.report(HoleStatus::Failed, String::new())
     };
     let done = |rep: &mut HoleReport| rep.ms = proposal.ms + ms_since(t0);
     if hole.len() < 3 {

@@ -322,16 +322,8 @@ fn read_lines<R: BufRead>(
                 }
             }
             Some(b"vt") => {
-                let mut vals = [0.0f64; 2];
-                let mut n = 0;
-                for t in toks {
-                    let v = parse_f64(t)
-                        .ok_or_else(|| bad(format!("'{}' is not a number", show(t))))?;
-                    if let Some(slot) = vals.get_mut(n) {
-                        *slot = v;
-                    }
-                    n += 1;
-                }
+                let (vals, n) =
+                    leading_reals::<2, _>(toks, |t| bad(format!("'{}' is not a number", show(t))))?;
                 if n == 0 || n > 3 {
                     return Err(bad(format!("a 'vt' line needs 1 to 3 numbers, found {n}")));
                 }
@@ -341,16 +333,8 @@ fn read_lines<R: BufRead>(
                 extra.uv.push(vals);
             }
             Some(b"vn") => {
-                let mut vals = [0.0f64; 3];
-                let mut n = 0;
-                for t in toks {
-                    let v = parse_f64(t)
-                        .ok_or_else(|| bad(format!("'{}' is not a number", show(t))))?;
-                    if let Some(slot) = vals.get_mut(n) {
-                        *slot = v;
-                    }
-                    n += 1;
-                }
+                let (vals, n) =
+                    leading_reals::<3, _>(toks, |t| bad(format!("'{}' is not a number", show(t))))?;
                 if n != 3 {
                     return Err(bad(format!("a 'vn' line needs 3 numbers, found {n}")));
                 }
@@ -530,6 +514,24 @@ fn byte_colors(raw: &mut RawMesh, colors: &[[f64; 3]], scale255: bool) {
     } else {
         o.exact_colors = true;
     }
+}
+
+/// The first `N` numbers of a record's tokens (zeros where it has fewer) and how many
+/// it has; a token that is not a number is the error `bad` makes of it.
+fn leading_reals<'t, const N: usize, E>(
+    toks: impl Iterator<Item = &'t [u8]>,
+    bad: impl Fn(&[u8]) -> E,
+) -> Result<([f64; N], usize), E> {
+    let mut vals = [0.0f64; N];
+    let mut n = 0;
+    for t in toks {
+        let v = parse_f64(t).ok_or_else(|| bad(t))?;
+        if let Some(slot) = vals.get_mut(n) {
+            *slot = v;
+        }
+        n += 1;
+    }
+    Ok((vals, n))
 }
 
 /// A `vt`/`vn` index of a face corner (1-based, or negative: relative to the
