@@ -371,10 +371,11 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
         (report.timings.smooth_ms + report.timings.fill_ms) / 1000.0
     );
 
-    // The picture is drawn on its own thread while the model is written; its file is
-    // written after the model's, so that a picture never stands beside a lost model.
+    // The picture is finished on its own thread while the model is written, and its
+    // file written and synced beside the model's; it is put in place after the model,
+    // so that a picture never stands beside a lost model.
     let (written, write_ms, drawn) = std::thread::scope(|s| {
-        let drawing = args.picture.as_ref().map(|_| {
+        let drawing = args.picture.as_ref().map(|path| {
             s.spawn(|| {
                 let t = Instant::now();
                 let (picture, sketched) = match sketch {
@@ -386,7 +387,8 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
                         Duration::ZERO,
                     ),
                 };
-                (picture.to_png(), sketched + t.elapsed())
+                let staged = picture.to_png().map(|png| holefill::io::stage(path, &png));
+                (staged, sketched + t.elapsed())
             })
         });
         let t = Instant::now();
@@ -394,13 +396,14 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
         let write_ms = t.elapsed().as_secs_f64() * 1000.0;
         (written, write_ms, drawing.map(|h| h.join()))
     });
+    // a staged picture not committed is removed when dropped (here, on an error)
     written.map_err(io_failure)?;
     report.timings.write_ms = write_ms;
     if let (Some(path), Some(drawn)) = (&args.picture, drawn) {
         let t = Instant::now();
         let drawing_ms = match drawn {
-            Ok((Ok(png), took)) => {
-                holefill::io::write_atomic(path, &png).map_err(io_failure)?;
+            Ok((Ok(staged), took)) => {
+                staged.and_then(|s| s.commit()).map_err(io_failure)?;
                 took.as_secs_f64() * 1000.0
             }
             Ok((Err(e), took)) => {
