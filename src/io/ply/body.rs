@@ -2,9 +2,9 @@
 //! context (element name and index, line); vertices and faces into the `RawMesh`, with
 //! a fast path for plain binary vertex and triangle records.
 
-use super::header::{Element, Kind, Prop, Role, Scalar};
+use super::header::{Element, Kind, PlyScalar, Prop, Role};
 use super::{push_kept, FaceKeep};
-use crate::io::attrs::PropData;
+use crate::io::attrs::{PropData, ScalarType};
 use crate::io::text::{has_nul, parse_coord, parse_coord_f32, parse_f64, parse_i64, show, tokens};
 use crate::io::text::{Lines, Next, MAX_LINE};
 use crate::io::{io_error, malformed, read_error, unit_color, Caps, IoError, RawMesh};
@@ -48,16 +48,16 @@ macro_rules! rd {
     }};
 }
 
-fn read_binary<R: Read>(r: &mut R, t: Scalar, be: bool) -> std::io::Result<f64> {
+fn read_binary<R: Read>(r: &mut R, t: ScalarType, be: bool) -> std::io::Result<f64> {
     Ok(match t {
-        Scalar::I8 => f64::from(rd!(r, i8, be)),
-        Scalar::U8 => f64::from(rd!(r, u8, be)),
-        Scalar::I16 => f64::from(rd!(r, i16, be)),
-        Scalar::U16 => f64::from(rd!(r, u16, be)),
-        Scalar::I32 => f64::from(rd!(r, i32, be)),
-        Scalar::U32 => f64::from(rd!(r, u32, be)),
-        Scalar::F32 => f64::from(rd!(r, f32, be)),
-        Scalar::F64 => rd!(r, f64, be),
+        ScalarType::I8 => f64::from(rd!(r, i8, be)),
+        ScalarType::U8 => f64::from(rd!(r, u8, be)),
+        ScalarType::I16 => f64::from(rd!(r, i16, be)),
+        ScalarType::U16 => f64::from(rd!(r, u16, be)),
+        ScalarType::I32 => f64::from(rd!(r, i32, be)),
+        ScalarType::U32 => f64::from(rd!(r, u32, be)),
+        ScalarType::F32 => f64::from(rd!(r, f32, be)),
+        ScalarType::F64 => rd!(r, f64, be),
     })
 }
 
@@ -173,7 +173,7 @@ impl<R: BufRead> Body<'_, R> {
     }
 
     /// A binary value (None for ASCII sources).
-    fn bin(&mut self, t: Scalar) -> Option<std::io::Result<f64>> {
+    fn bin(&mut self, t: ScalarType) -> Option<std::io::Result<f64>> {
         match &mut self.src {
             Src::Binary { r, be } => {
                 let be = *be;
@@ -184,7 +184,7 @@ impl<R: BufRead> Body<'_, R> {
     }
 
     /// A coordinate (finite).
-    fn coord(&mut self, t: Scalar) -> Result<f64, IoError> {
+    fn coord(&mut self, t: ScalarType) -> Result<f64, IoError> {
         let v = match self.bin(t) {
             Some(res) => res.map_err(|e| self.bin_err(e))?,
             None => {
@@ -195,7 +195,7 @@ impl<R: BufRead> Body<'_, R> {
                 }
                 let r = self.token()?;
                 let tok = self.tok_bytes(r);
-                let v = if t == Scalar::F32 {
+                let v = if t == ScalarType::F32 {
                     parse_coord_f32(tok)
                 } else {
                     parse_coord(tok)
@@ -211,7 +211,7 @@ impl<R: BufRead> Body<'_, R> {
     }
 
     /// An integer (list counts, indices).
-    fn int(&mut self, t: Scalar) -> Result<i64, IoError> {
+    fn int(&mut self, t: ScalarType) -> Result<i64, IoError> {
         match self.bin(t) {
             // Integer types only (checked in the header): exact in f64.
             Some(res) => Ok(res.map_err(|e| self.bin_err(e))? as i64),
@@ -237,14 +237,14 @@ impl<R: BufRead> Body<'_, R> {
     }
 
     /// A list's length.
-    fn count(&mut self, c: Scalar) -> Result<u64, IoError> {
+    fn count(&mut self, c: ScalarType) -> Result<u64, IoError> {
         let n = self.int(c)?;
         u64::try_from(n).map_err(|_| self.err(format!("negative list length {n}")))
     }
 
     /// A value of any type kept as it is (NaN and infinities included): exact in
     /// `f64` for every PLY type; ASCII `float` is parsed straight to `f32`.
-    fn value(&mut self, t: Scalar) -> Result<f64, IoError> {
+    fn value(&mut self, t: ScalarType) -> Result<f64, IoError> {
         if let Some(res) = self.bin(t) {
             return res.map_err(|e| self.bin_err(e));
         }
@@ -253,7 +253,7 @@ impl<R: BufRead> Body<'_, R> {
         }
         let r = self.token()?;
         let tok = self.tok_bytes(r);
-        let v = if t == Scalar::F32 {
+        let v = if t == ScalarType::F32 {
             std::str::from_utf8(tok)
                 .ok()
                 .and_then(|s| s.parse::<f32>().ok())
@@ -299,10 +299,10 @@ impl<R: BufRead> Body<'_, R> {
 }
 
 /// A colour value of type `t` as a component in `[0, 1]`.
-fn color_value(v: f64, t: Scalar) -> f32 {
+fn color_value(v: f64, t: ScalarType) -> f32 {
     let c = match t {
-        Scalar::U16 => v / 65535.0,
-        Scalar::F32 | Scalar::F64 => v,
+        ScalarType::U16 => v / 65535.0,
+        ScalarType::F32 | ScalarType::F64 => v,
         _ => v / 255.0,
     };
     unit_color(c)
@@ -362,7 +362,7 @@ pub(super) fn read_vertices<R: BufRead>(
 }
 
 /// Decodes a binary scalar from the start of `b` (None when `b` is too short).
-fn decode(b: &[u8], t: Scalar, be: bool) -> Option<f64> {
+fn decode(b: &[u8], t: ScalarType, be: bool) -> Option<f64> {
     macro_rules! d {
         ($t:ty) => {{
             let a: [u8; std::mem::size_of::<$t>()] =
@@ -375,20 +375,20 @@ fn decode(b: &[u8], t: Scalar, be: bool) -> Option<f64> {
         }};
     }
     Some(match t {
-        Scalar::I8 => f64::from(d!(i8)),
-        Scalar::U8 => f64::from(d!(u8)),
-        Scalar::I16 => f64::from(d!(i16)),
-        Scalar::U16 => f64::from(d!(u16)),
-        Scalar::I32 => f64::from(d!(i32)),
-        Scalar::U32 => f64::from(d!(u32)),
-        Scalar::F32 => f64::from(d!(f32)),
-        Scalar::F64 => d!(f64),
+        ScalarType::I8 => f64::from(d!(i8)),
+        ScalarType::U8 => f64::from(d!(u8)),
+        ScalarType::I16 => f64::from(d!(i16)),
+        ScalarType::U16 => f64::from(d!(u16)),
+        ScalarType::I32 => f64::from(d!(i32)),
+        ScalarType::U32 => f64::from(d!(u32)),
+        ScalarType::F32 => f64::from(d!(f32)),
+        ScalarType::F64 => d!(f64),
     })
 }
 
 /// Where one vertex property sits in a binary record: offset, type, role, and the
 /// kept property it goes to.
-type Field = (usize, Scalar, Role, Option<usize>);
+type Field = (usize, ScalarType, Role, Option<usize>);
 
 /// For a binary vertex element of scalars only: each property's field and the
 /// record size (the fast path of [`read_vertices`]).
@@ -408,7 +408,7 @@ fn binary_vertex_layout<R>(
             return None;
         };
         layout.push((off, t, role, k));
-        off += t.size() as usize;
+        off += t.size();
     }
     Some((layout, off))
 }
@@ -538,7 +538,7 @@ pub(super) fn read_faces<R: BufRead>(
         && matches!(
             el.props.as_slice(),
             [Prop {
-                kind: Kind::List(Scalar::U8, Scalar::I32 | Scalar::U32),
+                kind: Kind::List(ScalarType::U8, ScalarType::I32 | ScalarType::U32),
                 ..
             }]
         );

@@ -10,81 +10,68 @@ use std::path::Path;
 /// Longest header line accepted.
 const MAX_HEADER_LINE: u64 = 64 * 1024;
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum Scalar {
-    I8,
-    U8,
-    I16,
-    U16,
-    I32,
-    U32,
-    F32,
-    F64,
+/// The PLY side of a stored scalar type: its names in a header, the range of an
+/// integer type, whether every value is exactly an `f32`.
+pub(super) trait PlyScalar: Sized {
+    /// The type a header names (`uchar`, `uint8`, ...).
+    fn parse(s: &[u8]) -> Option<Self>;
+    /// The range of an integer type (`None` for floating-point types).
+    fn int_range(self) -> Option<(i64, i64)>;
+    /// The type's name in a header.
+    fn name(self) -> &'static str;
+    /// True when every value of the type is exactly an `f32`.
+    fn fits_f32(self) -> bool;
 }
 
-impl Scalar {
-    pub(super) fn parse(s: &[u8]) -> Option<Scalar> {
+impl PlyScalar for ScalarType {
+    fn parse(s: &[u8]) -> Option<ScalarType> {
         Some(match s {
-            b"char" | b"int8" => Scalar::I8,
-            b"uchar" | b"uint8" => Scalar::U8,
-            b"short" | b"int16" => Scalar::I16,
-            b"ushort" | b"uint16" => Scalar::U16,
-            b"int" | b"int32" => Scalar::I32,
-            b"uint" | b"uint32" => Scalar::U32,
-            b"float" | b"float32" => Scalar::F32,
-            b"double" | b"float64" => Scalar::F64,
+            b"char" | b"int8" => ScalarType::I8,
+            b"uchar" | b"uint8" => ScalarType::U8,
+            b"short" | b"int16" => ScalarType::I16,
+            b"ushort" | b"uint16" => ScalarType::U16,
+            b"int" | b"int32" => ScalarType::I32,
+            b"uint" | b"uint32" => ScalarType::U32,
+            b"float" | b"float32" => ScalarType::F32,
+            b"double" | b"float64" => ScalarType::F64,
             _ => return None,
         })
     }
-    pub(super) fn size(self) -> u64 {
-        match self {
-            Scalar::I8 | Scalar::U8 => 1,
-            Scalar::I16 | Scalar::U16 => 2,
-            Scalar::I32 | Scalar::U32 | Scalar::F32 => 4,
-            Scalar::F64 => 8,
-        }
-    }
-    pub(super) fn is_int(self) -> bool {
-        !matches!(self, Scalar::F32 | Scalar::F64)
-    }
-    /// The range of an integer type (`None` for floating-point types).
-    pub(super) fn int_range(self) -> Option<(i64, i64)> {
+    fn int_range(self) -> Option<(i64, i64)> {
         Some(match self {
-            Scalar::I8 => (i8::MIN.into(), i8::MAX.into()),
-            Scalar::U8 => (0, u8::MAX.into()),
-            Scalar::I16 => (i16::MIN.into(), i16::MAX.into()),
-            Scalar::U16 => (0, u16::MAX.into()),
-            Scalar::I32 => (i32::MIN.into(), i32::MAX.into()),
-            Scalar::U32 => (0, u32::MAX.into()),
-            Scalar::F32 | Scalar::F64 => return None,
+            ScalarType::I8 => (i8::MIN.into(), i8::MAX.into()),
+            ScalarType::U8 => (0, u8::MAX.into()),
+            ScalarType::I16 => (i16::MIN.into(), i16::MAX.into()),
+            ScalarType::U16 => (0, u16::MAX.into()),
+            ScalarType::I32 => (i32::MIN.into(), i32::MAX.into()),
+            ScalarType::U32 => (0, u32::MAX.into()),
+            ScalarType::F32 | ScalarType::F64 => return None,
         })
     }
-    /// The type's name in a header.
-    pub(super) fn name(self) -> &'static str {
+    fn name(self) -> &'static str {
         match self {
-            Scalar::I8 => "char",
-            Scalar::U8 => "uchar",
-            Scalar::I16 => "short",
-            Scalar::U16 => "ushort",
-            Scalar::I32 => "int",
-            Scalar::U32 => "uint",
-            Scalar::F32 => "float",
-            Scalar::F64 => "double",
+            ScalarType::I8 => "char",
+            ScalarType::U8 => "uchar",
+            ScalarType::I16 => "short",
+            ScalarType::U16 => "ushort",
+            ScalarType::I32 => "int",
+            ScalarType::U32 => "uint",
+            ScalarType::F32 => "float",
+            ScalarType::F64 => "double",
         }
     }
-    /// True when every value of the type is exactly an `f32`.
-    pub(super) fn fits_f32(self) -> bool {
+    fn fits_f32(self) -> bool {
         matches!(
             self,
-            Scalar::I8 | Scalar::U8 | Scalar::I16 | Scalar::U16 | Scalar::F32
+            ScalarType::I8 | ScalarType::U8 | ScalarType::I16 | ScalarType::U16 | ScalarType::F32
         )
     }
 }
 
 #[derive(Clone, Copy, Debug)]
 pub(super) enum Kind {
-    Scalar(Scalar),
-    List(Scalar, Scalar),
+    Scalar(ScalarType),
+    List(ScalarType, ScalarType),
 }
 
 #[derive(Debug)]
@@ -111,8 +98,8 @@ impl Element {
                 .props
                 .iter()
                 .map(|p| match p.kind {
-                    Kind::Scalar(t) => t.size(),
-                    Kind::List(c, _) => c.size(),
+                    Kind::Scalar(t) => t.size() as u64,
+                    Kind::List(c, _) => c.size() as u64,
                 })
                 .sum(),
         }
@@ -131,27 +118,14 @@ pub(super) enum Role {
     Skip,
 }
 
-pub(super) fn attr_type(t: Scalar) -> ScalarType {
-    match t {
-        Scalar::I8 => ScalarType::I8,
-        Scalar::U8 => ScalarType::U8,
-        Scalar::I16 => ScalarType::I16,
-        Scalar::U16 => ScalarType::U16,
-        Scalar::I32 => ScalarType::I32,
-        Scalar::U32 => ScalarType::U32,
-        Scalar::F32 => ScalarType::F32,
-        Scalar::F64 => ScalarType::F64,
-    }
-}
-
 /// An empty kept property of a header property's types.
 pub(super) fn new_property(p: &Prop, capacity: usize) -> Property {
     let data = match p.kind {
-        Kind::Scalar(t) => PropData::Scalar(Values::new(attr_type(t), capacity)),
+        Kind::Scalar(t) => PropData::Scalar(Values::new(t, capacity)),
         Kind::List(c, t) => PropData::List {
-            count: attr_type(c),
+            count: c,
             starts: vec![0],
-            items: Values::new(attr_type(t), capacity),
+            items: Values::new(t, capacity),
         },
     };
     Property {
@@ -236,7 +210,7 @@ pub(super) fn read_header<R: BufRead>(
                     .ok_or_else(|| bad("a property before any element".into()))?;
                 let ty = |s: Option<&[u8]>| {
                     let s = s.unwrap_or(b"");
-                    Scalar::parse(s)
+                    ScalarType::parse(s)
                         .ok_or_else(|| bad(format!("unknown property type '{}'", show(s))))
                 };
                 let head = t.next();

@@ -17,7 +17,7 @@ use super::attrs::{Corners, PlyExtras, PropData, Property};
 use super::text::Lines;
 use super::{malformed, Caps, Encoding, IoError, Precision, RawMesh, MAX_ELEMENTS};
 use body::{read_faces, read_vertices, Body, Src};
-use header::{attr_type, new_property, read_header, Element, Kind, Role};
+use header::{new_property, read_header, Element, Kind, PlyScalar, Role};
 use std::io::BufRead;
 use std::path::Path;
 
@@ -201,7 +201,7 @@ pub(crate) fn read<R: BufRead>(
         } else if let (true, Kind::List(c, t)) =
             (p.name == "texcoord" && texcoord.is_none(), p.kind)
         {
-            texcoord = Some((attr_type(c), attr_type(t)));
+            texcoord = Some((c, t));
             raw.attrs.uv = Some(Corners::default());
             fkeep.push(FaceKeep::TexCoord);
         } else {
