@@ -6,6 +6,8 @@
 #
 #   scripts/fill_ab.sh BIN_A BIN_B [PAIRS]        (PAIRS default 5)
 #
+# POLICY=FILE fills under that policy (e.g. one method forced).
+#
 # The holed inputs are the ones scripts/same_outputs.sh caches in $HOLES (default
 # /work/bench-out/same-outputs-holes): NAME-s1, -s2, -s3/holed.obj, hole seeds 1-3 of
 # every synthetic mesh of the bench.
@@ -19,7 +21,7 @@ HOLES=${HOLES:-/work/bench-out/same-outputs-holes}
 [ -d "$HOLES" ] || { echo "$HOLES: no holed inputs (run scripts/same_outputs.sh once)" >&2; exit 2; }
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
-ft() { "$1" fill "$2" "$tmp/o.obj" 2>/dev/null | sed -n 's/^FILL_TIME_S=//p'; }
+ft() { { "$1" fill "$2" "$tmp/o.obj" ${POLICY:+--policy "$POLICY"} 2>/dev/null || true; } | sed -n 's/^FILL_TIME_S=//p'; }
 printf '%-22s %10s %10s %8s\n' input a_fill_s b_fill_s ratio
 for d in "$HOLES"/*-s[123]; do
   in=$d/holed.obj
