@@ -14,7 +14,7 @@ use holefill::policy::Policy;
 use holefill::report::{FileRef, HoleStatus};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// Exit statuses (sysexits.h), so that scripts can tell permanent from retryable failures.
 pub mod exit {
@@ -273,10 +273,39 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
         .map_err(io_failure)?;
     let read_ms = t.elapsed().as_secs_f64() * 1000.0;
 
+    // The picture's sketch (the input's surface) is drawn while the holes are filled:
+    // a job on the fill's pool, which a worker takes before its share of the holes
+    // (with one thread there is no pool: the picture is drawn after the repair).
+    let picture_opts = holefill::picture::Options::default();
+    let threads = match policy.limits.threads {
+        0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
+        n => n,
+    };
+    let mut sketch: Option<(holefill::picture::Sketch, Duration)> = None;
     // an internal error (a bug) must still end in a clear message and EX_SOFTWARE,
     // with nothing written, rather than an abort
     let repaired = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-        holefill::repair(&raw, &policy)
+        if args.picture.is_none() || threads < 2 {
+            return holefill::repair(&raw, &policy);
+        }
+        rayon::in_place_scope(|s| {
+            let (raw, opts) = (&raw, &picture_opts);
+            let mut slot = Some(&mut sketch);
+            let mut found = |loops: Vec<Vec<u32>>| {
+                if let Some(slot) = slot.take() {
+                    s.spawn(move |_| {
+                        let t = Instant::now();
+                        // a bug in the sketch loses the sketch, never the repair
+                        *slot = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                            holefill::picture::Sketch::new(raw, &loops, opts)
+                        }))
+                        .ok()
+                        .map(|sk| (sk, t.elapsed()));
+                    });
+                }
+            };
+            holefill::repair_with(raw, &policy, Some(&mut found))
+        })
     }))
     .map_err(|_| {
         Failure(
@@ -342,19 +371,24 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
         (report.timings.smooth_ms + report.timings.fill_ms) / 1000.0
     );
 
-    // The picture is drawn on its own thread while the model is written; its file is
-    // written after the model's, so that a picture never stands beside a lost model.
+    // The picture is finished on its own thread while the model is written, and its
+    // file written and synced beside the model's; it is put in place after the model,
+    // so that a picture never stands beside a lost model.
     let (written, write_ms, drawn) = std::thread::scope(|s| {
-        let drawing = args.picture.as_ref().map(|_| {
+        let drawing = args.picture.as_ref().map(|path| {
             s.spawn(|| {
                 let t = Instant::now();
-                let png = holefill::picture::render(
-                    &out,
-                    &report,
-                    &holefill::picture::Options::default(),
-                )
-                .to_png();
-                (png, t.elapsed())
+                let (picture, sketched) = match sketch {
+                    Some((sketch, took)) => {
+                        (sketch.finish(&raw, &out, &report, &picture_opts), took)
+                    }
+                    None => (
+                        holefill::picture::render(&out, &report, &picture_opts),
+                        Duration::ZERO,
+                    ),
+                };
+                let staged = picture.to_png().map(|png| holefill::io::stage(path, &png));
+                (staged, sketched + t.elapsed())
             })
         });
         let t = Instant::now();
@@ -362,13 +396,14 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
         let write_ms = t.elapsed().as_secs_f64() * 1000.0;
         (written, write_ms, drawing.map(|h| h.join()))
     });
+    // a staged picture not committed is removed when dropped (here, on an error)
     written.map_err(io_failure)?;
     report.timings.write_ms = write_ms;
     if let (Some(path), Some(drawn)) = (&args.picture, drawn) {
         let t = Instant::now();
         let drawing_ms = match drawn {
-            Ok((Ok(png), took)) => {
-                holefill::io::write_atomic(path, &png).map_err(io_failure)?;
+            Ok((Ok(staged), took)) => {
+                staged.and_then(|s| s.commit()).map_err(io_failure)?;
                 took.as_secs_f64() * 1000.0
             }
             Ok((Err(e), took)) => {

@@ -23,6 +23,30 @@ pub(crate) fn write_with<F>(path: &Path, body: F) -> Result<(), IoError>
 where
     F: FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
 {
+    stage_with(path, body)?.commit()
+}
+
+/// A file written and synced beside its target but not in place yet:
+/// [`Staged::commit`] renames it over the target and syncs the folder; dropped
+/// uncommitted, it is removed. For a file that must not appear before another one is
+/// safely written (a repair's picture after its model) while both are written at once.
+#[derive(Debug)]
+pub struct Staged {
+    tmp: PathBuf,
+    path: PathBuf,
+    dir: PathBuf,
+    committed: bool,
+}
+
+/// Writes `bytes` to a temporary file next to `path` and syncs it (see [`Staged`]).
+pub fn stage(path: &Path, bytes: &[u8]) -> Result<Staged, IoError> {
+    stage_with(path, |w| w.write_all(bytes))
+}
+
+fn stage_with<F>(path: &Path, body: F) -> Result<Staged, IoError>
+where
+    F: FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
+{
     let name = path.file_name().ok_or_else(|| {
         io_error(
             path,
@@ -47,20 +71,37 @@ where
         .create_new(true)
         .open(&tmp)
         .map_err(|e| io_error(path, e))?;
-    let result = (|| -> std::io::Result<()> {
-        let mut w = BufWriter::with_capacity(BUF_CAPACITY, file);
-        body(&mut w)?;
-        let file = w.into_inner().map_err(|e| e.into_error())?;
-        file.sync_all()?;
-        drop(file);
-        std::fs::rename(&tmp, path)
-    })();
-    if let Err(e) = result {
-        // Best effort: the original error is what matters.
-        let _ = std::fs::remove_file(&tmp);
-        return Err(io_error(path, e));
+    // from here on, dropping the staged file removes it
+    let staged = Staged {
+        tmp,
+        path: path.to_path_buf(),
+        dir,
+        committed: false,
+    };
+    let mut w = BufWriter::with_capacity(BUF_CAPACITY, file);
+    let synced = body(&mut w)
+        .and_then(|()| w.into_inner().map_err(|e| e.into_error()))
+        .and_then(|file| file.sync_all());
+    synced.map_err(|e| io_error(path, e))?;
+    Ok(staged)
+}
+
+impl Staged {
+    /// Renames the file over its target and syncs the folder.
+    pub fn commit(mut self) -> Result<(), IoError> {
+        std::fs::rename(&self.tmp, &self.path).map_err(|e| io_error(&self.path, e))?;
+        self.committed = true;
+        sync_dir(&self.dir).map_err(|e| io_error(&self.path, e))
     }
-    sync_dir(&dir).map_err(|e| io_error(path, e))
+}
+
+impl Drop for Staged {
+    fn drop(&mut self) {
+        if !self.committed {
+            // best effort: the error that dropped it is what matters
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+    }
 }
 
 /// Makes the rename durable (a no-op where folders cannot be opened as files).
@@ -109,6 +150,21 @@ mod tests {
         assert!(matches!(err, IoError::Io { .. }));
         assert!(err.to_string().contains("out.txt"), "{err}");
         assert_eq!(std::fs::read(&p).unwrap(), b"old");
+        assert!(leftovers(d.path()).is_empty());
+    }
+
+    #[test]
+    fn a_staged_file_appears_only_when_committed_and_is_removed_when_dropped() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("pic.png");
+        let staged = stage(&p, b"later").unwrap();
+        assert!(!p.exists());
+        assert_eq!(leftovers(d.path()).len(), 1);
+        staged.commit().unwrap();
+        assert_eq!(std::fs::read(&p).unwrap(), b"later");
+        assert!(leftovers(d.path()).is_empty());
+        drop(stage(&p, b"never").unwrap());
+        assert_eq!(std::fs::read(&p).unwrap(), b"later");
         assert!(leftovers(d.path()).is_empty());
     }
 

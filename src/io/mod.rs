@@ -148,7 +148,7 @@ mod ply;
 mod stl;
 mod text;
 
-pub use atomic::write_atomic;
+pub use atomic::{stage, write_atomic, Staged};
 
 use std::fs::File;
 use std::io::{BufReader, Write};

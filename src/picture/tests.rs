@@ -1,6 +1,8 @@
 use super::*;
 use crate::policy::Policy;
+use crate::report::RepairReport;
 use crate::testutil::sphere_cap_removed;
+use glam::DVec3;
 use std::path::Path;
 
 /// A sphere of radius 1 (1,280 faces) with a hole of `cap` radians around +z and, when
@@ -182,4 +184,85 @@ fn bad_indices_and_non_finite_points_do_not_panic() {
     report.traces.clear();
     let pic = render(&out, &report, &Options::default());
     assert_eq!(pic.height, HEADER + pic.width * 5 / 8);
+}
+
+/// The repair of `raw` with the loops `repair_with` reports.
+fn repair_seen(raw: &RawMesh, policy: &Policy) -> (RawMesh, RepairReport, Vec<Vec<u32>>) {
+    let mut loops = Vec::new();
+    let (out, report) =
+        crate::pipeline::repair_with(raw, policy, Some(&mut |l: Vec<Vec<u32>>| loops = l)).unwrap();
+    (out, report, loops)
+}
+
+#[test]
+fn a_sketch_finishes_into_the_picture_render_draws() {
+    let raw = holed_sphere(0.5, Some(0.35));
+    let policy = Policy::default_policy();
+    let (out, report, loops) = repair_seen(&raw, &policy);
+    assert_eq!(loops.len(), 2);
+    assert_eq!(report.summary.filled, 2);
+    let opts = Options::default();
+    let want = render(&out, &report, &opts);
+    let sketch = Sketch::new(&raw, &loops, &opts);
+    assert!(sketch.overview.is_some());
+    assert_eq!(sketch.tiles.len(), 2);
+    let got = sketch.finish(&raw, &out, &report, &opts);
+    assert_eq!((got.width, got.height), (want.width, want.height));
+    assert!(
+        got.rgb == want.rgb,
+        "the finished sketch differs from render"
+    );
+
+    // the loops from any start and in any order: the same
+    let mut turned: Vec<Vec<u32>> = loops.iter().rev().cloned().collect();
+    turned[0].rotate_left(3);
+    let got = Sketch::new(&raw, &turned, &opts).finish(&raw, &out, &report, &opts);
+    assert!(got.rgb == want.rgb);
+    // other options than the sketch's: drawn again, the same as render
+    let small = Options {
+        width: 320,
+        ..Options::default()
+    };
+    let got = Sketch::new(&raw, &loops, &opts).finish(&raw, &out, &report, &small);
+    assert!(got.rgb == render(&out, &report, &small).rgb);
+}
+
+#[test]
+fn what_the_sketch_drew_is_kept_only_where_the_surface_is_the_inputs() {
+    const MARK: [u8; 3] = [255, 0, 255];
+    let raw = holed_sphere(0.5, Some(0.35));
+    let marked = |loops: &[Vec<u32>]| {
+        let mut s = Sketch::new(&raw, loops, &Options::default());
+        let (_, over) = s.overview.as_mut().unwrap();
+        over.rect(1, 1, 3, 3, MARK);
+        for t in &mut s.tiles {
+            t.before.rect(1, 1, 3, 3, MARK);
+        }
+        s
+    };
+    let opts = Options::default();
+    let marks = |p: &Picture| p.rgb.chunks(3).filter(|c| *c == MARK).count();
+
+    // kept: the overview's and both close-ups' marks (before and after tiles)
+    let (out, report, loops) = repair_seen(&raw, &Policy::default_policy());
+    let pic = marked(&loops).finish(&raw, &out, &report, &opts);
+    assert_eq!(marks(&pic), 9 * (1 + 2 * 2));
+
+    // a loop the repair did not report: its close-up is drawn again, and the overview
+    // (which looks at the loops) too; the other close-up is kept
+    let mut other = loops.clone();
+    other[0].pop();
+    let pic = marked(&other).finish(&raw, &out, &report, &opts);
+    assert_eq!(marks(&pic), 9 * 2);
+
+    // smoothing moves the input's vertices: nothing kept, the picture is render's
+    let policy = Policy::from_toml_str(
+        "[smooth]\nenabled = true\niterations = 2\n",
+        Path::new("test.toml"),
+    )
+    .unwrap();
+    let (out, report, loops) = repair_seen(&raw, &policy);
+    let pic = marked(&loops).finish(&raw, &out, &report, &opts);
+    assert_eq!(marks(&pic), 0);
+    assert!(pic.rgb == render(&out, &report, &opts).rgb);
 }

@@ -1,0 +1,150 @@
+//! The part of a picture that the input and its holes decide, drawn while the holes
+//! are filled: the overview's surface and the "before" surfaces of the largest
+//! holes' close-ups. [`Sketch::finish`] draws the rest once the repair is known and
+//! keeps of the sketch only what it would have drawn the same: the picture is the one
+//! [`super::render`] draws, to the bit.
+
+use super::holes::{bounds, neighbourhoods, overview_direction, Ring};
+use super::panels::{before_tile, closeup_camera, overview_surface};
+use super::raster::Panel;
+use super::view::Camera;
+use super::{draw, overview_stride, Kept, Options, Picture};
+use crate::io::RawMesh;
+use crate::report::RepairReport;
+use glam::DVec3;
+
+/// What is drawn of a repair's picture before the repair ends; see the module doc.
+///
+/// ```no_run
+/// # let (raw, policy) = (holefill::io::RawMesh::default(), holefill::policy::Policy::default_policy());
+/// use holefill::picture::{Options, Sketch};
+/// let opts = Options::default();
+/// let mut sketch = None;
+/// let (out, report) = rayon::in_place_scope(|s| {
+///     let (raw, opts) = (&raw, &opts);
+///     let mut slot = Some(&mut sketch);
+///     let mut found = |loops: Vec<Vec<u32>>| {
+///         if let Some(slot) = slot.take() {
+///             s.spawn(move |_| *slot = Some(Sketch::new(raw, &loops, opts)));
+///         }
+///     };
+///     holefill::repair_with(raw, &policy, Some(&mut found))
+/// })
+/// .unwrap();
+/// let picture = match sketch {
+///     Some(s) => s.finish(&raw, &out, &report, &opts),
+///     None => holefill::picture::render(&out, &report, &opts),
+/// };
+/// ```
+pub struct Sketch {
+    /// The options it was drawn with.
+    width: usize,
+    max_overview_faces: usize,
+    max_closeup_faces: usize,
+    pub(super) overview: Option<(Camera, Panel)>,
+    pub(super) tiles: Vec<Tile>,
+}
+
+/// A close-up's surface before the repair.
+pub(super) struct Tile {
+    pub ring: Ring,
+    pub cam: Camera,
+    pub before: Panel,
+}
+
+impl Sketch {
+    /// Draws the surface of `input` for the overview, looking at the holes `loops`
+    /// (as [`crate::repair_with`] reports them), and the surfaces around the largest
+    /// of them for their close-ups (the repair decides which holes get one: the
+    /// failed ones first; the largest are those in the common case).
+    pub fn new(input: &RawMesh, loops: &[Vec<u32>], opts: &Options) -> Sketch {
+        let width = opts.width.max(320);
+        let (over_h, tile) = (width * 5 / 8, width / 4);
+        let (pos, faces) = (&input.positions, &input.faces);
+        let stride = overview_stride(faces.len(), opts);
+        let (lo, hi) = bounds(pos, faces, stride);
+        let rings: Vec<Ring> = loops.iter().filter_map(|l| Ring::new(pos, l)).collect();
+        let mut sketch = Sketch {
+            width,
+            max_overview_faces: opts.max_overview_faces,
+            max_closeup_faces: opts.max_closeup_faces,
+            overview: None,
+            tiles: Vec::new(),
+        };
+        if !lo.cmple(hi).all() {
+            return sketch;
+        }
+        let cam = Camera::fit(
+            overview_direction(rings.iter()),
+            lo,
+            hi,
+            width,
+            over_h,
+            0.92,
+        );
+        let surface = overview_surface(input, faces.len(), stride, &cam, (width, over_h));
+        sketch.overview = Some((cam, surface));
+
+        let mut order: Vec<&Ring> = rings.iter().filter(|r| r.shown()).collect();
+        order.sort_by(|a, b| b.perimeter.total_cmp(&a.perimeter));
+        order.truncate(opts.max_closeups.min(u64::BITS as usize));
+        let near = neighbourhoods(
+            pos,
+            (faces, 0),
+            &order,
+            opts.max_closeup_faces,
+            (lo, hi),
+            faces.len(),
+        );
+        sketch.tiles = order
+            .into_iter()
+            .zip(near)
+            .map(|(ring, near)| {
+                let cam = closeup_camera(input, ring, &near.surface, tile);
+                let before = before_tile(input, &cam, &near.surface, tile);
+                Tile {
+                    ring: ring.clone(),
+                    cam,
+                    before,
+                }
+            })
+            .collect();
+        sketch
+    }
+
+    /// The picture of the repair of `input` (the input this sketch drew) into `mesh`
+    /// with `report`: what the sketch drew is kept where the repaired model's surface
+    /// is the input's, bit for bit (faces up to the first patch, the input's vertices)
+    /// and drawn the same way (same options, camera and loop); the rest is drawn now.
+    pub fn finish(
+        self,
+        input: &RawMesh,
+        mesh: &RawMesh,
+        report: &RepairReport,
+        opts: &Options,
+    ) -> Picture {
+        let same_options = self.width == opts.width.max(320)
+            && self.max_overview_faces == opts.max_overview_faces
+            && self.max_closeup_faces == opts.max_closeup_faces;
+        let kept = (same_options && same_surface(input, mesh)).then_some(Kept {
+            surface: input.faces.len(),
+            overview: self.overview,
+            tiles: self.tiles,
+        });
+        draw(mesh, report, opts, kept)
+    }
+}
+
+/// The repaired model's first faces are the input's faces, and its first vertices the
+/// input's, bit for bit (that the faces after them are patches, [`draw`] checks).
+fn same_surface(input: &RawMesh, mesh: &RawMesh) -> bool {
+    let n = input.faces.len();
+    let bits = |p: &DVec3| p.to_array().map(f64::to_bits);
+    mesh.faces.get(..n) == Some(&input.faces[..])
+        && input.positions.len() <= mesh.positions.len()
+        && input
+            .positions
+            .iter()
+            .zip(&mesh.positions)
+            .all(|(a, b)| bits(a) == bits(b))
+}
