@@ -20,6 +20,7 @@ struct Stretch {
 impl Stretch {
     /// Appends the bytes as a new buffer view and an accessor over it; the accessor's
     /// index.
+    #[allow(clippy::too_many_arguments)]
     fn accessor(
         &mut self,
         doc: &mut Value,
