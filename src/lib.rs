@@ -31,4 +31,4 @@ pub(crate) mod testutil;
 
 pub use fill::dispatch::parallel::{start_workers, WARM_SPIN};
 pub use io::{read, write};
-pub use pipeline::{repair, repair_with, RepairError};
+pub use pipeline::{repair, RepairError};

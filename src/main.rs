@@ -273,9 +273,9 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
         .map_err(io_failure)?;
     let read_ms = t.elapsed().as_secs_f64() * 1000.0;
 
-    // The picture's sketch (the input's surface) is drawn while the holes are filled:
-    // a job on the fill's pool, which a worker takes before its share of the holes
-    // (with one thread there is no pool: the picture is drawn after the repair).
+    // The picture's sketch (the input's surface) is drawn while the input is
+    // repaired: a job on the fill's pool, which its worker, waiting for the fill,
+    // takes at once (with one thread there is no pool: the picture is drawn after).
     let picture_opts = holefill::picture::Options::default();
     let threads = match policy.limits.threads {
         0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
@@ -289,22 +289,17 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
             return holefill::repair(&raw, &policy);
         }
         rayon::in_place_scope(|s| {
-            let (raw, opts) = (&raw, &picture_opts);
-            let mut slot = Some(&mut sketch);
-            let mut found = |loops: Vec<Vec<u32>>| {
-                if let Some(slot) = slot.take() {
-                    s.spawn(move |_| {
-                        let t = Instant::now();
-                        // a bug in the sketch loses the sketch, never the repair
-                        *slot = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                            holefill::picture::Sketch::new(raw, &loops, opts)
-                        }))
-                        .ok()
-                        .map(|sk| (sk, t.elapsed()));
-                    });
-                }
-            };
-            holefill::repair_with(raw, &policy, Some(&mut found))
+            let (raw, opts, slot) = (&raw, &picture_opts, &mut sketch);
+            s.spawn(move |_| {
+                let t = Instant::now();
+                // a bug in the sketch loses the sketch, never the repair
+                *slot = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                    holefill::picture::Sketch::new(raw, opts)
+                }))
+                .ok()
+                .map(|sk| (sk, t.elapsed()));
+            });
+            holefill::repair(raw, &policy)
         })
     }))
     .map_err(|_| {

@@ -284,3 +284,84 @@ pub(super) fn neighbourhoods(
     }
     out
 }
+
+/// The boundary loops of a triangle soup as the repair finds its holes, before it
+/// does (oriented against the faces, as [`HoleTrace::boundary`]): an edge `a -> b` of
+/// a face is on the boundary when no other face has it, either way round. Faces with
+/// a repeated or missing vertex are left out, and so are loops through a vertex where
+/// two boundary edges start (touching loops: which way they pair is the repair's
+/// choice). For a clean mesh these are the repair's holes; where they are not, the
+/// picture draws again what depends on them.
+pub(super) fn soup_loops(faces: &[[u32; 3]], vertices: usize) -> Vec<Vec<u32>> {
+    const NONE: u32 = u32::MAX;
+    let ok = |f: &[u32; 3]| {
+        f.iter().all(|&v| (v as usize) < vertices) && f[0] != f[1] && f[1] != f[2] && f[0] != f[2]
+    };
+    // each vertex's outgoing edges, in one array (offsets per vertex)
+    let mut start = vec![0u32; vertices + 1];
+    for f in faces.iter().filter(|f| ok(f)) {
+        for &v in f {
+            start[v as usize + 1] += 1;
+        }
+    }
+    for i in 0..vertices {
+        start[i + 1] += start[i];
+    }
+    let mut fill = start.clone();
+    let mut to = vec![0u32; start[vertices] as usize];
+    for f in faces.iter().filter(|f| ok(f)) {
+        for i in 0..3 {
+            let a = f[i] as usize;
+            to[fill[a] as usize] = f[(i + 1) % 3];
+            fill[a] += 1;
+        }
+    }
+    let out = |v: u32| &to[start[v as usize] as usize..start[v as usize + 1] as usize];
+    // the loop goes against the faces: a boundary edge a -> b makes a follow b
+    let mut next = vec![NONE; vertices];
+    let mut forked = vec![false; vertices];
+    for a in 0..vertices as u32 {
+        for &b in out(a) {
+            let once = out(a).iter().filter(|&&c| c == b).count() == 1;
+            if once && !out(b).contains(&a) {
+                let n = &mut next[b as usize];
+                if *n == NONE {
+                    *n = a;
+                } else {
+                    forked[b as usize] = true;
+                }
+            }
+        }
+    }
+    let mut seen = vec![false; vertices];
+    let mut loops = Vec::new();
+    for s in 0..vertices {
+        if next[s] == NONE || seen[s] {
+            continue;
+        }
+        let mut lp = Vec::new();
+        let mut v = s;
+        let closed = loop {
+            seen[v] = true;
+            lp.push(v as u32);
+            if forked[v] {
+                break false;
+            }
+            let n = next[v];
+            if n == NONE {
+                break false;
+            }
+            if n as usize == s {
+                break true;
+            }
+            if seen[n as usize] {
+                break false;
+            }
+            v = n as usize;
+        };
+        if closed && lp.len() >= 3 {
+            loops.push(lp);
+        }
+    }
+    loops
+}

@@ -1,10 +1,10 @@
-//! The part of a picture that the input and its holes decide, drawn while the holes
-//! are filled: the overview's surface and the "before" surfaces of the largest
+//! The part of a picture that the input decides, drawn while it is repaired (the
+//! holes as the input's boundary loops): the overview's surface and the "before" surfaces of the largest
 //! holes' close-ups. [`Sketch::finish`] draws the rest once the repair is known and
 //! keeps of the sketch only what it would have drawn the same: the picture is the one
 //! [`super::render`] draws, to the bit.
 
-use super::holes::{bounds, neighbourhoods, overview_direction, Ring};
+use super::holes::{bounds, neighbourhoods, overview_direction, soup_loops, Ring};
 use super::panels::{before_tile, closeup_camera, overview_surface};
 use super::raster::Panel;
 use super::view::Camera;
@@ -19,18 +19,13 @@ use glam::DVec3;
 /// # let (raw, policy) = (holefill::io::RawMesh::default(), holefill::policy::Policy::default_policy());
 /// use holefill::picture::{Options, Sketch};
 /// let opts = Options::default();
-/// let mut sketch = None;
-/// let (out, report) = rayon::in_place_scope(|s| {
-///     let (raw, opts) = (&raw, &opts);
-///     let mut slot = Some(&mut sketch);
-///     let mut found = |loops: Vec<Vec<u32>>| {
-///         if let Some(slot) = slot.take() {
-///             s.spawn(move |_| *slot = Some(Sketch::new(raw, &loops, opts)));
-///         }
-///     };
-///     holefill::repair_with(raw, &policy, Some(&mut found))
-/// })
-/// .unwrap();
+/// // the sketch beside the repair (here on a thread of its own)
+/// let (sketch, repaired) = std::thread::scope(|s| {
+///     let sketch = s.spawn(|| Sketch::new(&raw, &opts));
+///     let repaired = holefill::repair(&raw, &policy);
+///     (sketch.join().ok(), repaired)
+/// });
+/// let (out, report) = repaired.unwrap();
 /// let picture = match sketch {
 ///     Some(s) => s.finish(&raw, &out, &report, &opts),
 ///     None => holefill::picture::render(&out, &report, &opts),
@@ -53,11 +48,17 @@ pub(super) struct Tile {
 }
 
 impl Sketch {
-    /// Draws the surface of `input` for the overview, looking at the holes `loops`
-    /// (as [`crate::repair_with`] reports them), and the surfaces around the largest
-    /// of them for their close-ups (the repair decides which holes get one: the
+    /// Draws the surface of `input` for the overview, looking at its boundary loops
+    /// (the holes the repair will find in a clean mesh), and the surfaces around the
+    /// largest loops for their close-ups (the repair decides which holes get one: the
     /// failed ones first; the largest are those in the common case).
-    pub fn new(input: &RawMesh, loops: &[Vec<u32>], opts: &Options) -> Sketch {
+    pub fn new(input: &RawMesh, opts: &Options) -> Sketch {
+        let loops = soup_loops(&input.faces, input.positions.len());
+        Sketch::from_loops(input, &loops, opts)
+    }
+
+    /// [`Sketch::new`] looking at the loops `loops`.
+    pub(super) fn from_loops(input: &RawMesh, loops: &[Vec<u32>], opts: &Options) -> Sketch {
         let width = opts.width.max(320);
         let (over_h, tile) = (width * 5 / 8, width / 4);
         let (pos, faces) = (&input.positions, &input.faces);

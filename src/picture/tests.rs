@@ -186,12 +186,35 @@ fn bad_indices_and_non_finite_points_do_not_panic() {
     assert_eq!(pic.height, HEADER + pic.width * 5 / 8);
 }
 
-/// The repair of `raw` with the loops `repair_with` reports.
+/// The repair of `raw` and the boundary loops of `raw` that the sketch looks at.
 fn repair_seen(raw: &RawMesh, policy: &Policy) -> (RawMesh, RepairReport, Vec<Vec<u32>>) {
-    let mut loops = Vec::new();
-    let (out, report) =
-        crate::pipeline::repair_with(raw, policy, Some(&mut |l: Vec<Vec<u32>>| loops = l)).unwrap();
-    (out, report, loops)
+    let (out, report) = crate::pipeline::repair(raw, policy).unwrap();
+    (
+        out,
+        report,
+        holes::soup_loops(&raw.faces, raw.positions.len()),
+    )
+}
+
+#[test]
+fn the_soups_loops_are_the_holes_the_repair_finds() {
+    let raw = holed_sphere(0.5, Some(0.35));
+    let (_, report, loops) = repair_seen(&raw, &Policy::default_policy());
+    // the same loops, oriented the same way (a turn of the start aside)
+    let ring = |l: &[u32]| Ring::new(&raw.positions, l).unwrap();
+    let mut got: Vec<Ring> = loops.iter().map(|l| ring(l)).collect();
+    let mut want: Vec<Ring> = report.traces.iter().map(|t| ring(&t.boundary)).collect();
+    got.sort_by_key(|r| r.boundary[0]);
+    want.sort_by_key(|r| r.boundary[0]);
+    assert_eq!(got.len(), 2);
+    assert_eq!(got, want);
+
+    // loops touching at a vertex (which way they pair is the repair's choice), a face
+    // with a vertex missing and a degenerate face: left out, no panic
+    let faces = vec![[0, 1, 2], [0, 3, 4], [0, 1, 99], [2, 2, 3]];
+    assert!(holes::soup_loops(&faces, 5).is_empty());
+    // one triangle: its loop runs against it
+    assert_eq!(holes::soup_loops(&[[0, 1, 2]], 3), vec![vec![0, 2, 1]]);
 }
 
 #[test]
@@ -203,7 +226,7 @@ fn a_sketch_finishes_into_the_picture_render_draws() {
     assert_eq!(report.summary.filled, 2);
     let opts = Options::default();
     let want = render(&out, &report, &opts);
-    let sketch = Sketch::new(&raw, &loops, &opts);
+    let sketch = Sketch::new(&raw, &opts);
     assert!(sketch.overview.is_some());
     assert_eq!(sketch.tiles.len(), 2);
     let got = sketch.finish(&raw, &out, &report, &opts);
@@ -216,14 +239,14 @@ fn a_sketch_finishes_into_the_picture_render_draws() {
     // the loops from any start and in any order: the same
     let mut turned: Vec<Vec<u32>> = loops.iter().rev().cloned().collect();
     turned[0].rotate_left(3);
-    let got = Sketch::new(&raw, &turned, &opts).finish(&raw, &out, &report, &opts);
+    let got = Sketch::from_loops(&raw, &turned, &opts).finish(&raw, &out, &report, &opts);
     assert!(got.rgb == want.rgb);
     // other options than the sketch's: drawn again, the same as render
     let small = Options {
         width: 320,
         ..Options::default()
     };
-    let got = Sketch::new(&raw, &loops, &opts).finish(&raw, &out, &report, &small);
+    let got = Sketch::from_loops(&raw, &loops, &opts).finish(&raw, &out, &report, &small);
     assert!(got.rgb == render(&out, &report, &small).rgb);
 }
 
@@ -232,7 +255,7 @@ fn what_the_sketch_drew_is_kept_only_where_the_surface_is_the_inputs() {
     const MARK: [u8; 3] = [255, 0, 255];
     let raw = holed_sphere(0.5, Some(0.35));
     let marked = |loops: &[Vec<u32>]| {
-        let mut s = Sketch::new(&raw, loops, &Options::default());
+        let mut s = Sketch::from_loops(&raw, loops, &Options::default());
         let (_, over) = s.overview.as_mut().unwrap();
         over.rect(1, 1, 3, 3, MARK);
         for t in &mut s.tiles {

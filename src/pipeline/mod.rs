@@ -37,22 +37,6 @@ pub enum RepairError {
 /// policy says so, and fills every hole. Returns the repaired soup (input vertices
 /// first, unmoved unless smoothing is on) and the repair log.
 pub fn repair(raw: &RawMesh, policy: &Policy) -> Result<(RawMesh, RepairReport), RepairError> {
-    repair_with(raw, policy, None)
-}
-
-/// What [`repair_with`] calls once the holes are known, before any is filled: every
-/// hole's boundary loop (vertex numbers of the input, oriented as
-/// [`HoleTrace::boundary`]), in the log's order.
-pub type HolesFound<'a> = &'a mut dyn FnMut(Vec<Vec<u32>>);
-
-/// [`repair`], telling `holes_found` the holes before they are filled, so that a
-/// caller can start work that needs only the input and the holes (the picture's
-/// [`crate::picture::Sketch`]) while the holes are filled.
-pub fn repair_with(
-    raw: &RawMesh,
-    policy: &Policy,
-    holes_found: Option<HolesFound<'_>>,
-) -> Result<(RawMesh, RepairReport), RepairError> {
     let mut report = RepairReport::new(policy);
     let mut stitched_loops: Vec<Vec<VertexId>> = Vec::new();
     report.resolved.reader = raw.notes.clone();
@@ -123,7 +107,6 @@ pub fn repair_with(
         policy,
         &mut report.resolved.degenerate_loops,
         &mut report.traces,
-        holes_found,
     );
     report.timings.fill_ms = stitch_ms + t.elapsed().as_secs_f64() * 1000.0;
     let end = mesh.num_faces() as u32;
@@ -160,7 +143,6 @@ fn fill_all(
     policy: &Policy,
     degenerate: &mut usize,
     traces: &mut Vec<HoleTrace>,
-    holes_found: Option<HolesFound<'_>>,
 ) -> Vec<HoleReport> {
     let (mut holes, mut skip, comp) = find_holes(mesh, policy);
     // islands inside holes: removed or bridged (the mesh changes), or their hole skipped
@@ -206,14 +188,6 @@ fn fill_all(
                 s.clone_from(old);
             }
         }
-    }
-    if let Some(found) = holes_found {
-        found(
-            holes
-                .iter()
-                .map(|h| h.vertices.iter().map(|v| v.0).collect())
-                .collect(),
-        );
     }
     // about one check per hole to fill (more for holes whose first patch fails)
     let to_fill = skip.iter().filter(|s| s.is_none()).count();
