@@ -1,5 +1,6 @@
 //! The PLY writer.
 
+use super::header::PlyScalar;
 use crate::io::attrs::{PropData, Property, ScalarType, Values};
 use crate::io::{color_byte, Encoding, Precision, RawMesh};
 use std::io::Write;
@@ -42,12 +43,12 @@ pub(crate) fn write<W: Write>(w: &mut W, raw: &RawMesh) -> std::io::Result<()> {
     )?;
     let declare = |w: &mut W, p: &Property| -> std::io::Result<()> {
         match &p.data {
-            PropData::Scalar(v) => writeln!(w, "property {} {}", type_name(v.ty()), p.name),
+            PropData::Scalar(v) => writeln!(w, "property {} {}", v.ty().name(), p.name),
             PropData::List { count, items, .. } => writeln!(
                 w,
                 "property list {} {} {}",
-                type_name(*count),
-                type_name(items.ty()),
+                count.name(),
+                items.ty().name(),
                 p.name
             ),
         }
@@ -71,12 +72,7 @@ pub(crate) fn write<W: Write>(w: &mut W, raw: &RawMesh) -> std::io::Result<()> {
             .unwrap_or((ScalarType::U8, ScalarType::F32))
     });
     if let Some((c, t)) = texcoord {
-        writeln!(
-            w,
-            "property list {} {} texcoord",
-            type_name(c),
-            type_name(t)
-        )?;
+        writeln!(w, "property list {} {} texcoord", c.name(), t.name())?;
     }
     for (name, n, props) in ply.map(|p| p.elements.as_slice()).unwrap_or_default() {
         writeln!(w, "element {name} {n}")?;
@@ -243,18 +239,5 @@ impl Out<'_> {
             self.rec.push(b'\n');
         }
         w.write_all(self.rec)
-    }
-}
-
-fn type_name(t: ScalarType) -> &'static str {
-    match t {
-        ScalarType::I8 => "char",
-        ScalarType::U8 => "uchar",
-        ScalarType::I16 => "short",
-        ScalarType::U16 => "ushort",
-        ScalarType::I32 => "int",
-        ScalarType::U32 => "uint",
-        ScalarType::F32 => "float",
-        ScalarType::F64 => "double",
     }
 }
