@@ -20,7 +20,7 @@ fn bits(d: &PropData) -> Vec<u64> {
         PropData::Scalar(v) => (0..v.len()).map(|i| v.get(i).unwrap().to_bits()).collect(),
         PropData::List { starts, items, .. } => starts
             .iter()
-            .map(|&s| s)
+            .copied()
             .chain((0..items.len()).map(|i| items.get(i).unwrap().to_bits()))
             .collect(),
     }
@@ -430,12 +430,12 @@ fn planar_grid_hole_uvs_and_colours_are_linear_within_bound() {
     let colors = out.colors.as_ref().unwrap();
     let uv = out.attrs.uv.as_ref().unwrap();
     let mut worst: f64 = 0.0;
-    for v in nv..out.positions.len() {
-        let p = out.positions[v];
+    assert_eq!(colors.len(), out.positions.len(), "a colour per vertex");
+    for (p, color) in out.positions.iter().zip(colors).skip(nv) {
         assert!(p.z.abs() < 1e-9, "patch not planar: {p}");
         let want = [p.x / 20.0, p.y / 20.0, 0.25 + (p.x + p.y) / 80.0];
         for k in 0..3 {
-            worst = worst.max((f64::from(colors[v][k]) - want[k]).abs() - 1e-7);
+            worst = worst.max((f64::from(color[k]) - want[k]).abs() - 1e-7);
         }
     }
     for (k, f) in out.faces.iter().enumerate().skip(raw.faces.len()) {

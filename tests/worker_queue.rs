@@ -56,7 +56,7 @@ fn three_workers_200_scans_each_repaired_exactly_once() {
     let failed = logs(&out.path().join("failed"));
     assert_eq!(repaired.len(), good, "{:?}", repaired.keys());
     assert_eq!(failed.len(), 6, "{:?}", failed.keys());
-    for i in 0..good {
+    for (i, file) in files.iter().enumerate().take(good) {
         let name = format!("s{i:03}.obj");
         let log = &repaired[&format!("{name}.repair.json")];
         assert_eq!(log["status"], "repaired");
@@ -64,7 +64,7 @@ fn three_workers_200_scans_each_repaired_exactly_once() {
         assert!(log["summary"]["filled"].as_u64().unwrap() >= 1, "{log}");
         let model = std::fs::read_to_string(out.path().join(&name)).unwrap();
         let faces = model.lines().filter(|l| l.starts_with("f ")).count();
-        let before = std::fs::read_to_string(&files[i])
+        let before = std::fs::read_to_string(file)
             .unwrap()
             .lines()
             .filter(|l| l.starts_with("f "))

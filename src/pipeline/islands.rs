@@ -156,6 +156,7 @@ fn bridge(mesh: &mut Mesh, outer: &[VertexId], island: &[VertexId]) -> bool {
         |s: usize, u: usize| d(outer[(s + 1) % m], island[u]) + d(outer[s], island[(u + 1) % k]);
     let mut best_s: Vec<Option<(f64, usize, usize)>> = vec![None; m];
     let mut best_u: Vec<Option<(f64, usize, usize)>> = vec![None; k];
+    #[allow(clippy::needless_range_loop)] // s and u index both tables and the cost
     for s in 0..m {
         for u in 0..k {
             let c = cost(s, u);

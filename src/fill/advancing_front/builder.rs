@@ -448,7 +448,7 @@ impl<'a> Builder<'a> {
         for x in 0..self.k as u32 {
             self.rekey(x);
         }
-        while self.ring.alive().len() > 0 {
+        while !self.ring.alive().is_empty() {
             self.ctx.deadline.check()?;
             let Some(e) = self.heap.pop() else {
                 return Err(FillError::internal(

@@ -132,7 +132,7 @@ impl Builder<'_> {
 
     /// Checks the step that replaces `x` by `slots` on its front.
     pub(super) fn check(&mut self, x: u32, ev: &Eval, slots: Vec<Slot>) -> Option<Plan> {
-        let nd = self.ring.nodes[x as usize].clone();
+        let nd = self.ring.nodes[x as usize];
         let (p, n) = (nd.prev, nd.next);
         let (vi, vp, vn) = (
             nd.vert,
@@ -344,7 +344,7 @@ impl Builder<'_> {
 
     pub(super) fn apply(&mut self, plan: Plan) -> Result<(), FillError> {
         let x = plan.x;
-        let nd = self.ring.nodes[x as usize].clone();
+        let nd = self.ring.nodes[x as usize];
         let (p, n, f) = (nd.prev, nd.next, nd.front);
         for q in &plan.new_pos {
             self.pos.push(*q);

@@ -80,15 +80,12 @@ pub fn trim_and_fill(
             }
         }
         let on = |l: &Vec<VertexId>| l.iter().filter(|v| on_corner[v.idx()]).count();
-        let Some(lp) = trimmed
+        let lp = trimmed
             .topo
             .boundary_loops()
             .into_iter()
             .filter(|l| on(l) > 0)
-            .max_by_key(on)
-        else {
-            return None;
-        };
+            .max_by_key(on)?;
         if lp
             .iter()
             .any(|v| avoid.get(v.idx()).copied().unwrap_or(false))
