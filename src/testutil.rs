@@ -1,6 +1,6 @@
 //! Fixtures shared by the unit tests (compiled only for tests): the meshes (grid,
-//! icosphere, cylinder) and their holes (faces cut away, the loop picked), and a fan
-//! patch.
+//! icosphere, cylinder) and their holes (faces cut away, cracks and slits, the loop
+//! picked), and a fan patch.
 
 use crate::io::RawMesh;
 use crate::mesh::{Mesh, VertexId};
@@ -11,7 +11,23 @@ use std::collections::HashMap;
 /// A grid of `n x n` square cells over `[lo, hi]²` with heights `z(x, y)`, faces up:
 /// vertex `(i, j)` is `j * (n + 1) + i`, each cell cut by its diagonal from `(i, j)` to
 /// `(i + 1, j + 1)` into two faces, cells in row order.
-pub fn grid(n: usize, lo: f64, hi: f64, mut z: impl FnMut(f64, f64) -> f64) -> RawMesh {
+pub fn grid(n: usize, lo: f64, hi: f64, z: impl FnMut(f64, f64) -> f64) -> RawMesh {
+    grid_cut(n, lo, hi, z, false)
+}
+
+/// The [`grid`] with the diagonals alternating, so that no direction is preferred: a
+/// cell `(i, j)` with `i + j` odd is cut from `(i + 1, j)` to `(i, j + 1)` instead.
+pub fn grid_alternating(n: usize, lo: f64, hi: f64, z: impl FnMut(f64, f64) -> f64) -> RawMesh {
+    grid_cut(n, lo, hi, z, true)
+}
+
+fn grid_cut(
+    n: usize,
+    lo: f64,
+    hi: f64,
+    mut z: impl FnMut(f64, f64) -> f64,
+    alternate: bool,
+) -> RawMesh {
     let mut raw = RawMesh::default();
     for j in 0..=n {
         for i in 0..=n {
@@ -23,8 +39,14 @@ pub fn grid(n: usize, lo: f64, hi: f64, mut z: impl FnMut(f64, f64) -> f64) -> R
     let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
     for j in 0..n {
         for i in 0..n {
-            raw.faces.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-            raw.faces.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+            if alternate && (i + j) % 2 == 1 {
+                raw.faces.push([id(i, j), id(i + 1, j), id(i, j + 1)]);
+                raw.faces
+                    .push([id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)]);
+            } else {
+                raw.faces.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+                raw.faces.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
         }
     }
     raw
@@ -44,6 +66,38 @@ pub fn cut_faces(mut raw: RawMesh, cut: impl Fn(DVec3) -> bool) -> RawMesh {
 /// which `cut` holds.
 pub fn cells_removed(raw: RawMesh, cut: impl Fn(usize, usize) -> bool) -> RawMesh {
     cut_faces(raw, |c| cut(c.x.floor() as usize, c.y.floor() as usize))
+}
+
+/// `raw` split along a cut: each vertex for which `on_cut` holds gets a copy, moved by
+/// `offset` and appended (in vertex order), and the faces whose centroid satisfies
+/// `side` use the copies instead: a crack (or, with `offset` zero, a slit) between the
+/// two sides.
+pub fn split_along(
+    mut raw: RawMesh,
+    on_cut: impl Fn(DVec3) -> bool,
+    offset: DVec3,
+    side: impl Fn(DVec3) -> bool,
+) -> RawMesh {
+    let mut copy = HashMap::new();
+    for i in 0..raw.positions.len() {
+        let p = raw.positions[i];
+        if on_cut(p) {
+            copy.insert(i as u32, raw.positions.len() as u32);
+            raw.positions.push(p + offset);
+        }
+    }
+    let pos = &raw.positions;
+    for f in &mut raw.faces {
+        let c = f.iter().map(|&v| pos[v as usize]).sum::<DVec3>() / 3.0;
+        if side(c) {
+            for v in f.iter_mut() {
+                if let Some(&k) = copy.get(v) {
+                    *v = k;
+                }
+            }
+        }
+    }
+    raw
 }
 
 /// `a` and `b` as one soup, `b`'s vertices numbered after `a`'s.
@@ -236,6 +290,15 @@ pub fn icosphere(level: usize, r: f64) -> RawMesh {
 /// direction lies within `cap` radians of `dir`: a sphere with one round hole.
 pub fn sphere_cap_removed(level: usize, r: f64, dir: DVec3, cap: f64) -> RawMesh {
     sphere_caps_removed(level, r, &[(dir, cap)])
+}
+
+/// A unit icosphere (`level` subdivisions) without the faces whose centroid direction
+/// lies within `cap` radians of +z, as a mesh, and the hole's loop (its only one).
+pub fn sphere_with_hole(level: usize, cap: f64) -> (Mesh, Vec<VertexId>) {
+    let raw = sphere_cap_removed(level, 1.0, DVec3::Z, cap);
+    let (mesh, lp) = mesh_and_loop(&raw, |_, _| true);
+    assert_eq!(mesh.topo.boundary_loops().len(), 1);
+    (mesh, lp)
 }
 
 /// An icosphere of radius `r` without the faces whose centroid direction lies within

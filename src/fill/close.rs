@@ -213,22 +213,11 @@ mod tests {
     /// L-shaped notch, and one rim vertex is lifted so that the loop is far from flat.
     #[test]
     fn closes_a_notched_loop_that_others_find_hard() {
-        let mut raw = crate::testutil::grid(6, 0.0, 6.0, |_, _| 0.0);
+        use crate::testutil::{cells_removed, grid};
         // remove cells (1..5, 1..3) and (1..3, 3..5): an L-shaped hole
-        let cell = |i: usize, j: usize| j * 6 + i;
-        let mut gone: Vec<usize> = Vec::new();
-        for j in 1..5 {
-            for i in 1..5 {
-                if j < 3 || i < 3 {
-                    gone.push(cell(i, j));
-                }
-            }
-        }
-        gone.sort_unstable();
-        for c in gone.iter().rev() {
-            raw.faces.remove(2 * c + 1);
-            raw.faces.remove(2 * c);
-        }
+        let mut raw = cells_removed(grid(6, 0.0, 6.0, |_, _| 0.0), |i, j| {
+            (1..5).contains(&i) && (1..5).contains(&j) && (j < 3 || i < 3)
+        });
         raw.positions[4 * 7 + 4].z = 0.6; // the reflex corner of the L, lifted
         let (mesh, _) = Mesh::from_raw(&raw);
         mesh.validate().unwrap();

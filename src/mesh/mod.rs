@@ -635,6 +635,7 @@ impl Mesh {
 mod tests {
     use super::*;
     use crate::io::RawMesh;
+    use crate::testutil::{cells_removed, mesh_and_loop};
 
     fn grid(n: usize) -> RawMesh {
         crate::testutil::grid(n, 0.0, n as f64, |_, _| 0.0)
@@ -661,12 +662,8 @@ mod tests {
 
     #[test]
     fn fill_a_hole_by_adding_faces() {
-        let mut raw = grid(4);
         // remove the two faces of the cell (1,1)
-        let n = 4;
-        let cell = n + 1; // cell (1, 1)
-        raw.faces.remove(2 * cell + 1);
-        raw.faces.remove(2 * cell);
+        let raw = cells_removed(grid(4), |i, j| (i, j) == (1, 1));
         let (mut m, _) = Mesh::from_raw(&raw);
         m.validate().unwrap();
         let loops = m.topo.boundary_loops();
@@ -685,21 +682,8 @@ mod tests {
 
     /// The grid of [`grid`]`(4)` with the cells (1,1) and (2,1) removed: a hole of 6.
     fn grid_with_hole() -> (Mesh, Vec<VertexId>) {
-        let mut raw = grid(4);
-        let cell = |i: usize, j: usize| j * 4 + i;
-        for c in [cell(2, 1), cell(1, 1)] {
-            raw.faces.remove(2 * c + 1);
-            raw.faces.remove(2 * c);
-        }
-        let (m, _) = Mesh::from_raw(&raw);
-        m.validate().unwrap();
-        let hole = m
-            .topo
-            .boundary_loops()
-            .into_iter()
-            .find(|l| l.len() == 6)
-            .unwrap();
-        (m, hole)
+        let raw = cells_removed(grid(4), |i, j| j == 1 && (1..=2).contains(&i));
+        mesh_and_loop(&raw, |_, l| l.len() == 6)
     }
 
     /// A fan around a new centre vertex closes the hole; every twin is linked (the

@@ -1,26 +1,18 @@
 use super::*;
 use crate::policy::Policy;
 use crate::report::RepairReport;
-use crate::testutil::sphere_cap_removed;
+use crate::testutil::sphere_caps_removed;
 use glam::DVec3;
 use std::path::Path;
 
 /// A sphere of radius 1 (1,280 faces) with a hole of `cap` radians around +z and, when
 /// `second` is given, another around +x.
 fn holed_sphere(cap: f64, second: Option<f64>) -> RawMesh {
-    let mut raw = sphere_cap_removed(3, 1.0, DVec3::Z, cap);
-    if let Some(c) = second {
-        let pos = raw.positions.clone();
-        raw.faces.retain(|f| {
-            let m = f
-                .iter()
-                .map(|&v| pos[v as usize])
-                .sum::<DVec3>()
-                .normalize();
-            m.dot(DVec3::X) < c.cos()
-        });
-    }
-    raw
+    let caps: Vec<(DVec3, f64)> = [(DVec3::Z, cap)]
+        .into_iter()
+        .chain(second.map(|c| (DVec3::X, c)))
+        .collect();
+    sphere_caps_removed(3, 1.0, &caps)
 }
 
 fn is(c: [u8; 3], want: [u8; 3]) -> bool {

@@ -300,36 +300,19 @@ pub fn stitch(mesh: &Mesh, tolerance: f64) -> Option<Stitched> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testutil::grid;
+    use crate::testutil::{grid, split_along};
     use glam::DVec3;
 
     /// A 6x6 grid cut along x = 3 into two halves with their own vertices on the cut
     /// (a crack): the right half's copies of the cut vertices are appended, shifted by
     /// `gap` in x.
     fn cracked(gap: f64) -> RawMesh {
-        let mut raw = grid(6, 0.0, 6.0, |_, _| 0.0);
-        let n = raw.positions.len() as u32;
-        let mut copy = std::collections::HashMap::new();
-        let cut: Vec<u32> = (0..n)
-            .filter(|&i| raw.positions[i as usize].x == 3.0)
-            .collect();
-        for &i in &cut {
-            copy.insert(i, raw.positions.len() as u32);
-            let p = raw.positions[i as usize];
-            raw.positions.push(p + DVec3::new(gap, 0.0, 0.0));
-        }
-        let pos = raw.positions.clone();
-        for f in &mut raw.faces {
-            let right = f.iter().map(|&v| pos[v as usize].x).sum::<f64>() / 3.0 > 3.0;
-            if right {
-                for v in f.iter_mut() {
-                    if let Some(&c) = copy.get(v) {
-                        *v = c;
-                    }
-                }
-            }
-        }
-        raw
+        split_along(
+            grid(6, 0.0, 6.0, |_, _| 0.0),
+            |p| p.x == 3.0,
+            DVec3::new(gap, 0.0, 0.0),
+            |c| c.x > 3.0,
+        )
     }
 
     #[test]
@@ -370,27 +353,12 @@ mod tests {
         // a slit inside a grid: the faces on the two sides of the segment x = 3,
         // 1 <= y <= 4 use copies of its inner vertices on the right: one loop of zero
         // area
-        let mut raw = grid(6, 0.0, 6.0, |_, _| 0.0);
-        let n = raw.positions.len() as u32;
-        let mut copy = std::collections::HashMap::new();
-        for i in 0..n {
-            let p = raw.positions[i as usize];
-            if p.x == 3.0 && p.y > 1.0 && p.y < 4.0 {
-                copy.insert(i, raw.positions.len() as u32);
-                raw.positions.push(p);
-            }
-        }
-        let pos = raw.positions.clone();
-        for f in &mut raw.faces {
-            let c = f.iter().map(|&v| pos[v as usize]).sum::<DVec3>() / 3.0;
-            if c.x > 3.0 && c.y > 1.0 && c.y < 4.0 {
-                for v in f.iter_mut() {
-                    if let Some(&k) = copy.get(v) {
-                        *v = k;
-                    }
-                }
-            }
-        }
+        let raw = split_along(
+            grid(6, 0.0, 6.0, |_, _| 0.0),
+            |p| p.x == 3.0 && p.y > 1.0 && p.y < 4.0,
+            DVec3::ZERO,
+            |c| c.x > 3.0 && c.y > 1.0 && c.y < 4.0,
+        );
         let (m, _) = Mesh::from_raw(&raw);
         m.validate().unwrap();
         assert_eq!(m.topo.boundary_loops().len(), 2, "border and slit");

@@ -11,7 +11,7 @@ use crate::io::RawMesh;
 use crate::mesh::Mesh;
 use crate::patch::{apply_patch, Hole};
 use crate::policy::{Checks, Policy, Settings};
-use crate::testutil::{self, cylinder_with_hole};
+use crate::testutil::{self, cylinder_with_hole, sphere_with_hole};
 use glam::{DVec2, DVec3};
 use proptest::prelude::*;
 use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
@@ -113,15 +113,6 @@ fn resample(corners: &[DVec2], h: f64) -> Vec<DVec2> {
 fn grid_with_hole(n: usize, cut: impl Fn(DVec3) -> bool) -> (Mesh, Vec<VertexId>) {
     let raw = testutil::cut_faces(testutil::grid(n, 0.0, n as f64, |_, _| 0.0), cut);
     testutil::mesh_and_loop(&raw, |_, l| l.len() != 4 * n)
-}
-
-/// Unit icosphere (`level` subdivisions) with the faces whose centroid lies within
-/// `cap` radians of +z removed.
-fn sphere_with_hole(level: usize, cap: f64) -> (Mesh, Vec<VertexId>) {
-    let raw = testutil::sphere_cap_removed(level, 1.0, DVec3::Z, cap);
-    let (mesh, lp) = testutil::mesh_and_loop(&raw, |_, _| true);
-    assert_eq!(mesh.topo.boundary_loops().len(), 1);
-    (mesh, lp)
 }
 
 // ----- running and checking ---------------------------------------------------------
@@ -638,37 +629,13 @@ fn saddle_hole() {
 #[test]
 fn slit_gives_a_clean_error() {
     let n = 8;
-    let mut raw = RawMesh::default();
-    for j in 0..=n {
-        for i in 0..=n {
-            raw.positions.push(DVec3::new(i as f64, j as f64, 0.0));
-        }
-    }
-    let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
     // copies of (2..=6, 4) for the faces above the cut
-    let base = raw.positions.len() as u32;
-    for i in 2..=6 {
-        raw.positions.push(DVec3::new(i as f64, 4.0, 0.0));
-    }
-    for j in 0..n {
-        for i in 0..n {
-            for f in [
-                [id(i, j), id(i + 1, j), id(i + 1, j + 1)],
-                [id(i, j), id(i + 1, j + 1), id(i, j + 1)],
-            ] {
-                let c = f.iter().map(|&v| raw.positions[v as usize]).sum::<DVec3>() / 3.0;
-                let f = f.map(|v| {
-                    let (vi, vj) = (v as usize % (n + 1), v as usize / (n + 1));
-                    if c.y > 4.0 && vj == 4 && (2..=6).contains(&vi) {
-                        base + (vi - 2) as u32
-                    } else {
-                        v
-                    }
-                });
-                raw.faces.push(f);
-            }
-        }
-    }
+    let raw = testutil::split_along(
+        testutil::grid(n, 0.0, n as f64, |_, _| 0.0),
+        |p| p.y == 4.0 && (2.0..=6.0).contains(&p.x),
+        DVec3::ZERO,
+        |c| c.y > 4.0,
+    );
     let (mesh, _) = Mesh::from_raw(&raw);
     mesh.validate().unwrap();
     let lp = mesh

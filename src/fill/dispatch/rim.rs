@@ -122,19 +122,10 @@ mod tests {
     /// rim is pulled across the hole, so the faces around it fold over the hole (the
     /// methods may or may not close it as it is; trimmed, it is a plain hole).
     fn folded_rim() -> RawMesh {
-        let mut raw = crate::testutil::grid(8, 0.0, 8.0, |_, _| 0.0);
-        let cell = |i: usize, j: usize| j * 8 + i;
-        let mut gone: Vec<usize> = Vec::new();
-        for j in 3..5 {
-            for i in 3..5 {
-                gone.push(cell(i, j));
-            }
-        }
-        gone.sort_unstable();
-        for c in gone.iter().rev() {
-            raw.faces.remove(2 * c + 1);
-            raw.faces.remove(2 * c);
-        }
+        use crate::testutil::{cells_removed, grid};
+        let mut raw = cells_removed(grid(8, 0.0, 8.0, |_, _| 0.0), |i, j| {
+            (3..5).contains(&i) && (3..5).contains(&j)
+        });
         // vertex (3, 4) of the loop pulled across the hole to (4.6, 4, 0.02)
         raw.positions[4 * 9 + 3] = DVec3::new(4.6, 4.0, 0.02);
         raw

@@ -8,7 +8,7 @@ use crate::io::RawMesh;
 use crate::mesh::Mesh;
 use crate::patch::{apply_patch, Hole};
 use crate::policy::{Checks, Policy};
-use crate::testutil::{self, cylinder_with_hole};
+use crate::testutil::{self, cylinder_with_hole, sphere_with_hole};
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 use std::f64::consts::PI;
@@ -29,47 +29,10 @@ fn height_grid(
     z: impl Fn(f64, f64) -> f64,
     cut: impl Fn(DVec3) -> bool,
 ) -> (Mesh, Vec<VertexId>) {
-    let mut raw = RawMesh::default();
-    let o = -(n as f64) * h / 2.0;
-    for j in 0..=n {
-        for i in 0..=n {
-            let (x, y) = (o + i as f64 * h, o + j as f64 * h);
-            raw.positions.push(DVec3::new(x, y, z(x, y)));
-        }
-    }
-    let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
-    for j in 0..n {
-        for i in 0..n {
-            // alternate the diagonal so the grid has no preferred direction
-            let fs = if (i + j) % 2 == 0 {
-                [
-                    [id(i, j), id(i + 1, j), id(i + 1, j + 1)],
-                    [id(i, j), id(i + 1, j + 1), id(i, j + 1)],
-                ]
-            } else {
-                [
-                    [id(i, j), id(i + 1, j), id(i, j + 1)],
-                    [id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)],
-                ]
-            };
-            for f in fs {
-                let c = f.iter().map(|&v| raw.positions[v as usize]).sum::<DVec3>() / 3.0;
-                if !cut(c) {
-                    raw.faces.push(f);
-                }
-            }
-        }
-    }
+    // the diagonals alternate so the grid has no preferred direction
+    let half = n as f64 * h / 2.0;
+    let raw = testutil::cut_faces(testutil::grid_alternating(n, -half, half, z), cut);
     build(&raw, |l| l.len() != 4 * n)
-}
-
-/// Unit icosphere (`level` subdivisions) with the faces whose centroid direction lies
-/// within `cap` radians of +z removed.
-fn icosphere_with_hole(level: usize, cap: f64) -> (Mesh, Vec<VertexId>) {
-    build(
-        &testutil::sphere_cap_removed(level, 1.0, DVec3::Z, cap),
-        |_| true,
-    )
 }
 
 // ----- running and checking ---------------------------------------------------------
@@ -136,7 +99,7 @@ fn planar_hole_gives_a_planar_patch() {
 }
 
 fn sphere_case(level: usize, cap: f64, k_range: std::ops::Range<usize>, bound: f64) {
-    let (mesh, lp) = icosphere_with_hole(level, cap);
+    let (mesh, lp) = sphere_with_hole(level, cap);
     assert!(k_range.contains(&lp.len()), "loop of {}", lp.len());
     let (hole, r) = run(&mesh, &lp, &Policy::default());
     let patch = r.unwrap();
@@ -210,7 +173,7 @@ fn saddle_hole() {
 /// hole still closes and the patch stays near the true sphere.
 #[test]
 fn noisy_sphere_hole_still_closes() {
-    let (mut mesh, lp) = icosphere_with_hole(4, 0.8);
+    let (mut mesh, lp) = sphere_with_hole(4, 0.8);
     let mut rng = ChaCha8Rng::seed_from_u64(42);
     let sigma = 0.005;
     // vertices within 3 rings of the loop
@@ -251,8 +214,8 @@ fn noisy_sphere_hole_still_closes() {
 #[test]
 fn every_improvement_step_keeps_a_valid_disk() {
     for (mesh, lp) in [
-        icosphere_with_hole(3, 0.75),
-        icosphere_with_hole(4, 1.1),
+        sphere_with_hole(3, 0.75),
+        sphere_with_hole(4, 1.1),
         cylinder_with_hole(48, 30, 0.7, 1.2),
     ] {
         for (ns, cr) in [(0, 0.0), (0, 0.6), (60, 0.0), (5, 0.9)] {
@@ -267,7 +230,7 @@ fn every_improvement_step_keeps_a_valid_disk() {
 
 #[test]
 fn same_seed_same_patch_bits() {
-    let (mesh, lp) = icosphere_with_hole(3, 0.75);
+    let (mesh, lp) = sphere_with_hole(3, 0.75);
     let policy = Policy::default();
     let (_, a) = run(&mesh, &lp, &policy);
     let (_, b) = run(&mesh, &lp, &policy);
@@ -284,7 +247,7 @@ fn same_seed_same_patch_bits() {
 
 #[test]
 fn expired_deadline_times_out() {
-    let (mesh, lp) = icosphere_with_hole(3, 0.75);
+    let (mesh, lp) = sphere_with_hole(3, 0.75);
     let policy = Policy::default();
     let hole = Hole::new(0, &mesh, lp, &policy);
     let ctx = FillContext {

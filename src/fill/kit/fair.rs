@@ -547,22 +547,15 @@ mod tests {
 
     /// A regular grid over [0,n]^2 with heights from `f`, interior vertices free.
     fn grid(n: usize, f: impl Fn(f64, f64) -> f64) -> LocalMesh {
-        let mut m = LocalMesh::default();
-        for j in 0..=n {
-            for i in 0..=n {
-                let (x, y) = (i as f64, j as f64);
-                m.positions.push(DVec3::new(x, y, f(x, y)));
-                m.free.push(i > 1 && j > 1 && i + 2 <= n && j + 2 <= n);
-            }
+        let raw = crate::testutil::grid(n, 0.0, n as f64, f);
+        let free = (0..=n)
+            .flat_map(|j| (0..=n).map(move |i| i > 1 && j > 1 && i + 2 <= n && j + 2 <= n))
+            .collect();
+        LocalMesh {
+            positions: raw.positions,
+            triangles: raw.faces,
+            free,
         }
-        let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
-        for j in 0..n {
-            for i in 0..n {
-                m.triangles.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-                m.triangles.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-            }
-        }
-        m
     }
 
     #[test]

@@ -278,22 +278,11 @@ mod tests {
     /// cells (9 new vertices), each new vertex pushed off its grid point in the plane.
     fn grid_hole() -> (Mesh, Hole, Patch, Vec<DVec3>) {
         let n = 9u32;
-        let mut raw = RawMesh::default();
-        for j in 0..n {
-            for i in 0..n {
-                raw.positions.push(DVec3::new(i as f64, j as f64, 0.0));
-            }
-        }
-        let gone = |i: u32, j: u32| (2..6).contains(&i) && (2..6).contains(&j);
+        let raw = crate::testutil::cells_removed(
+            crate::testutil::grid(8, 0.0, 8.0, |_, _| 0.0),
+            |i, j| (2..6).contains(&i) && (2..6).contains(&j),
+        );
         let id = |i: u32, j: u32| j * n + i;
-        for j in 0..n - 1 {
-            for i in 0..n - 1 {
-                if !gone(i, j) {
-                    raw.faces.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-                    raw.faces.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-                }
-            }
-        }
         let (mesh, _) = Mesh::from_raw(&raw);
         let lp = mesh
             .topo

@@ -3,28 +3,11 @@ use crate::io::attrs::Values;
 
 /// A planar grid (n x n quads) with the faces of one inner square removed.
 fn holed_grid(n: usize) -> RawMesh {
-    let mut positions = Vec::new();
-    for j in 0..=n {
-        for i in 0..=n {
-            positions.push(DVec3::new(i as f64, j as f64, 0.0));
-        }
-    }
-    let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
-    let mut faces = Vec::new();
-    for j in 0..n {
-        for i in 0..n {
-            if (n / 2 - 1..=n / 2).contains(&i) && (n / 2 - 1..=n / 2).contains(&j) {
-                continue;
-            }
-            faces.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-            faces.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-        }
-    }
-    RawMesh {
-        positions,
-        faces,
-        ..Default::default()
-    }
+    let inner = n / 2 - 1..=n / 2;
+    crate::testutil::cells_removed(
+        crate::testutil::grid(n, 0.0, n as f64, |_, _| 0.0),
+        |i, j| inner.contains(&i) && inner.contains(&j),
+    )
 }
 
 #[test]

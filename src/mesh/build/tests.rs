@@ -221,14 +221,10 @@ fn fans_of_four_to_six_faces_on_one_edge_are_resolved() {
 #[test]
 fn a_pinched_boundary_vertex_is_split() {
     // a grid with two holes touching at vertex 12 (cells (1,1) and (2,2))
-    let mut raw = crate::testutil::grid(4, 0.0, 4.0, |_, _| 0.0);
-    let cell = |i: usize, j: usize| j * 4 + i;
-    let mut gone = [cell(1, 1), cell(2, 2)];
-    gone.sort_unstable();
-    for c in gone.iter().rev() {
-        raw.faces.remove(2 * c + 1);
-        raw.faces.remove(2 * c);
-    }
+    let raw =
+        crate::testutil::cells_removed(crate::testutil::grid(4, 0.0, 4.0, |_, _| 0.0), |i, j| {
+            [(1, 1), (2, 2)].contains(&(i, j))
+        });
     let (m, rep) = Mesh::from_raw(&raw);
     m.validate().unwrap();
     assert_eq!(rep.non_manifold_vertices, 1);
