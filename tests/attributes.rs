@@ -456,25 +456,7 @@ fn planar_grid_hole_uvs_and_colours_are_linear_within_bound() {
 
 /// A planar grid of `n` x `n` unit quads in z = 0.
 fn grid_soup(n: usize) -> Soup {
-    let mut s = Soup::default();
-    for j in 0..=n {
-        for i in 0..=n {
-            s.v.push([i as f64, j as f64, 0.0]);
-        }
-    }
-    let id = |i: usize, j: usize| j * (n + 1) + i;
-    for j in 0..n {
-        for i in 0..n {
-            if (i + j) % 2 == 0 {
-                s.f.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-                s.f.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-            } else {
-                s.f.push([id(i, j), id(i + 1, j), id(i, j + 1)]);
-                s.f.push([id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)]);
-            }
-        }
-    }
-    s
+    grid(n, n, 1.0, 0.0, 0.0, |_, _| 0.0)
 }
 
 #[test]
@@ -742,15 +724,10 @@ fn a_gltf_without_holes_is_written_back_byte_for_byte() {
 /// The holed 20 x 20 grid as OBJ with colours written 0..255: red and green linear in
 /// x and y (integers at the grid's vertices), blue constant.
 fn byte_colour_grid_obj(s: &Soup) -> String {
-    let mut t = String::new();
-    for p in &s.v {
+    s.obj_text_with(|p| {
         let (r, g) = (40.0 + 8.0 * p[0], 30.0 + 9.0 * p[1]);
-        writeln!(t, "v {} {} {} {r} {g} 200", p[0], p[1], p[2]).unwrap();
-    }
-    for f in &s.f {
-        writeln!(t, "f {} {} {}", f[0] + 1, f[1] + 1, f[2] + 1).unwrap();
-    }
-    t
+        format!(" {r} {g} 200")
+    })
 }
 
 #[test]
@@ -818,15 +795,10 @@ fn obj_byte_colours_come_back_as_written_and_new_vertices_in_the_same_scale() {
 fn obj_unit_colours_with_more_digits_than_f32_come_back_as_written() {
     // red and green linear in x and y with every digit of an f64, blue constant
     let obj = |s: &Soup| {
-        let mut t = String::new();
-        for p in &s.v {
+        s.obj_text_with(|p| {
             let (r, g) = (0.1 + 0.031 * p[0], 0.2 + 0.029 * p[1]);
-            writeln!(t, "v {} {} {} {r} {g} 0.7", p[0], p[1], p[2]).unwrap();
-        }
-        for f in &s.f {
-            writeln!(t, "f {} {} {}", f[0] + 1, f[1] + 1, f[2] + 1).unwrap();
-        }
-        t
+            format!(" {r} {g} 0.7")
+        })
     };
     let vlines = |t: &str| -> Vec<String> {
         t.lines()

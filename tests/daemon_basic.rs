@@ -2,6 +2,7 @@
 //! written in place, a malformed file, a name collision, a file over a limit, read
 //! limits enforced by the worker, SIGHUP with a broken policy.
 
+mod common;
 mod daemon_support;
 use daemon_support::*;
 use std::fs;

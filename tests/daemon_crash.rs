@@ -1,6 +1,7 @@
 //! Isolation and recovery: a daemon killed with SIGKILL mid-repair, a file that kills
 //! its worker every time, a file that hangs its worker past the time limit.
 
+mod common;
 mod daemon_support;
 use daemon_support::*;
 use std::fs;

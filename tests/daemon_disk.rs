@@ -1,6 +1,7 @@
 //! An outbox on a full disk (a 1 MiB tmpfs, so the test needs root): the input is
 //! never lost, and the repair resumes once there is space again.
 
+mod common;
 mod daemon_support;
 use daemon_support::*;
 use std::fs;

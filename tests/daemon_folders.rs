@@ -1,6 +1,7 @@
 //! The folders: one that vanishes while the daemon runs, one that cannot be written,
 //! folders that alias the inbox, and processing folders holefill did not make.
 
+mod common;
 mod daemon_support;
 use daemon_support::*;
 use std::fs;

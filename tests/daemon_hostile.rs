@@ -3,6 +3,7 @@
 //! too long for the outputs. The daemon follows nothing, never hangs, and every file
 //! ends in the outbox or in the failed folder with a log that says why.
 
+mod common;
 mod daemon_support;
 use daemon_support::*;
 use std::ffi::OsStr;

@@ -2,6 +2,7 @@
 //! that come and go while every worker is busy, a file of one endless line under
 //! `max_faces`. (Test hooks: the busy workers.)
 
+mod common;
 mod daemon_support;
 use daemon_support::*;
 use std::fs;

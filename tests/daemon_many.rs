@@ -1,6 +1,7 @@
 //! Bursts: 200 files with two daemons on one inbox (each repaired exactly once), and 50
 //! files waiting before start (READY=1 only after the start-up scan).
 
+mod common;
 mod daemon_support;
 use daemon_support::*;
 use std::collections::HashMap;

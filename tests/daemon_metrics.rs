@@ -2,6 +2,7 @@
 //! scraped from `/metrics` against what happened to the files (read from their logs),
 //! a picture beside every repaired file's log, every file in `index.html`.
 
+mod common;
 mod daemon_support;
 mod metrics_support;
 

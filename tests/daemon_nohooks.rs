@@ -5,6 +5,7 @@
 //! feature, this file has no test.
 #![cfg(not(feature = "test-hooks"))]
 
+mod common;
 mod daemon_support;
 use daemon_support::*;
 use std::time::Duration;

@@ -3,6 +3,7 @@
 //! two daemons in separate PID namespaces on one inbox; the attempt count across
 //! put-backs; a producer of another user under `fs.protected_hardlinks`.
 
+mod common;
 mod daemon_support;
 use daemon_support::*;
 use std::fs;

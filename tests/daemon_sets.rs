@@ -2,6 +2,7 @@
 //! its texture, taken, repaired, published and archived together; a set with a missing
 //! image fails with the reason; hostile references are never followed.
 
+mod common;
 mod daemon_support;
 
 use daemon_support::*;

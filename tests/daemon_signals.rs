@@ -1,6 +1,7 @@
 //! SIGTERM during a long repair: exit 0 within the grace period, the file repaired or
 //! back in the inbox, never lost.
 
+mod common;
 mod daemon_support;
 use daemon_support::*;
 use std::time::{Duration, Instant};

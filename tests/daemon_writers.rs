@@ -3,6 +3,7 @@
 //! only once nobody holds it open and it stopped changing; an empty one waits (up to
 //! `max_wait_secs`).
 
+mod common;
 mod daemon_support;
 use daemon_support::*;
 use std::fs;

@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{cut, icosphere, obj_text, run, tempdir};
+use common::{cut, icosphere, run, tempdir};
 use std::fs;
 use std::path::Path;
 
@@ -33,7 +33,7 @@ fn count(rgb: &[u8], c: [u8; 3]) -> usize {
 fn two_holes() -> String {
     let (s, _) = cut(&icosphere(4), [0.0, 0.0, 1.0], 0.35);
     let (s, _) = cut(&s, [1.0, 0.0, 0.0], 0.5);
-    obj_text(&s)
+    s.obj_text()
 }
 
 #[test]

@@ -3,6 +3,7 @@
 //! outbox (the originals archived), a malformed one into the failed folder with the
 //! worker's log. Against a real nats-server; ignored where none is installed.
 
+mod common;
 mod daemon_support;
 mod metrics_support;
 mod worker_support;

@@ -3,6 +3,7 @@
 //! SIGKILL mid-repair, the server restarted mid-run, a file that crashes its worker
 //! every time. Ignored where no nats-server is installed (`.ci/run` installs it).
 
+mod common;
 mod metrics_support;
 mod worker_support;
 use metrics_support::*;

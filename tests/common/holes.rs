@@ -10,57 +10,9 @@
 use std::collections::HashMap;
 use std::f64::consts::TAU;
 
-pub type V3 = [f64; 3];
-
-/// A triangle soup.
-#[derive(Clone, Debug, Default)]
-pub struct Soup {
-    pub v: Vec<V3>,
-    pub f: Vec<[usize; 3]>,
-}
-
-impl Soup {
-    /// OBJ text (shortest round-trip decimal coordinates).
-    pub fn obj_text(&self) -> String {
-        let mut t = String::with_capacity(self.v.len() * 40 + self.f.len() * 24);
-        for p in &self.v {
-            t.push_str(&format!("v {} {} {}\n", p[0], p[1], p[2]));
-        }
-        for f in &self.f {
-            t.push_str(&format!("f {} {} {}\n", f[0] + 1, f[1] + 1, f[2] + 1));
-        }
-        t
-    }
-
-    /// Drops faces for which `remove` holds (given the face's centroid and the face),
-    /// then the unused vertices.
-    pub fn remove_faces(&self, remove: impl Fn(V3, [usize; 3]) -> bool) -> Soup {
-        let keep: Vec<[usize; 3]> = self
-            .f
-            .iter()
-            .copied()
-            .filter(|f| {
-                let c =
-                    [0, 1, 2].map(|k| (self.v[f[0]][k] + self.v[f[1]][k] + self.v[f[2]][k]) / 3.0);
-                !remove(c, *f)
-            })
-            .collect();
-        let mut map = vec![usize::MAX; self.v.len()];
-        let mut out = Soup::default();
-        for t in &keep {
-            let mut nt = [0; 3];
-            for k in 0..3 {
-                if map[t[k]] == usize::MAX {
-                    map[t[k]] = out.v.len();
-                    out.v.push(self.v[t[k]]);
-                }
-                nt[k] = map[t[k]];
-            }
-            out.f.push(nt);
-        }
-        out
-    }
-}
+#[path = "shapes.rs"]
+mod shapes;
+pub use shapes::{grid, icosphere, Soup, V3};
 
 /// Adds a small closed sphere (80 faces) beside the mesh, so that the mesh's
 /// bounding-box diagonal more than doubles: a hole that spans the whole part (the
@@ -138,32 +90,6 @@ pub fn boundary_loop_sizes(s: &Soup) -> Option<Vec<usize>> {
     Some(sizes)
 }
 
-/// A grid of `nx` x `ny` quads of edge `h` (two triangles each, normal +z before the
-/// height map), vertex `(i, j)` at `(x0 + i h, y0 + j h, z(x, y))`.
-pub fn grid(nx: usize, ny: usize, h: f64, x0: f64, y0: f64, z: impl Fn(f64, f64) -> f64) -> Soup {
-    let mut s = Soup::default();
-    for j in 0..=ny {
-        for i in 0..=nx {
-            let (x, y) = (x0 + i as f64 * h, y0 + j as f64 * h);
-            s.v.push([x, y, z(x, y)]);
-        }
-    }
-    let id = |i: usize, j: usize| j * (nx + 1) + i;
-    for j in 0..ny {
-        for i in 0..nx {
-            // alternate the diagonal so that no direction is preferred
-            if (i + j) % 2 == 0 {
-                s.f.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-                s.f.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-            } else {
-                s.f.push([id(i, j), id(i + 1, j), id(i, j + 1)]);
-                s.f.push([id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)]);
-            }
-        }
-    }
-    s
-}
-
 /// Index of the grid quad holding the point `(x, y)` of a [`grid`] at the origin.
 fn quad_of(c: V3, h: f64) -> (i64, i64) {
     ((c[0] / h).floor() as i64, (c[1] / h).floor() as i64)
@@ -230,80 +156,6 @@ pub fn cylinder_slot(n: usize, w: usize, len: usize) -> Soup {
 /// (a round hole of `n` boundary vertices), `rings` quads high.
 pub fn cylinder_end(n: usize, rings: usize) -> Soup {
     cylinder(1.0, n, rings, cyl_ring(1.0, n), true)
-}
-
-/// A unit icosphere subdivided `level` times, outward oriented.
-pub fn icosphere(level: usize) -> Soup {
-    let t = (1.0 + 5f64.sqrt()) / 2.0;
-    let norm = |p: V3| {
-        let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
-        [p[0] / l, p[1] / l, p[2] / l]
-    };
-    let mut v: Vec<V3> = [
-        [-1., t, 0.],
-        [1., t, 0.],
-        [-1., -t, 0.],
-        [1., -t, 0.],
-        [0., -1., t],
-        [0., 1., t],
-        [0., -1., -t],
-        [0., 1., -t],
-        [t, 0., -1.],
-        [t, 0., 1.],
-        [-t, 0., -1.],
-        [-t, 0., 1.],
-    ]
-    .iter()
-    .map(|p| norm(*p))
-    .collect();
-    let mut f: Vec<[usize; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    for _ in 0..level {
-        let mut mid: HashMap<(usize, usize), usize> = HashMap::new();
-        let mut nf = Vec::with_capacity(f.len() * 4);
-        for &[a, b, c] in &f {
-            let mut m = |a: usize, b: usize| -> usize {
-                *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                    let p = norm([
-                        (v[a][0] + v[b][0]) / 2.0,
-                        (v[a][1] + v[b][1]) / 2.0,
-                        (v[a][2] + v[b][2]) / 2.0,
-                    ]);
-                    v.push(p);
-                    v.len() - 1
-                })
-            };
-            let ab = m(a, b);
-            let bc = m(b, c);
-            let ca = m(c, a);
-            nf.push([a, ab, ca]);
-            nf.push([b, bc, ab]);
-            nf.push([c, ca, bc]);
-            nf.push([ab, bc, ca]);
-        }
-        f = nf;
-    }
-    Soup { v, f }
 }
 
 /// A unit icosphere with the cap of faces whose centroid lies within angle `cap`

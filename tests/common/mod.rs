@@ -1,95 +1,14 @@
-//! Fixtures for the integration tests: analytic surfaces with holes cut out, written
-//! as OBJ files, and helpers to run the real binary.
+//! Fixtures for the integration tests: analytic surfaces with holes cut out (the
+//! shapes from `shapes.rs`), written as OBJ files, and helpers to run the real binary.
 #![allow(dead_code)]
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-pub type V3 = [f64; 3];
-
-/// A triangle soup.
-#[derive(Clone, Debug, Default)]
-pub struct Soup {
-    pub v: Vec<V3>,
-    pub f: Vec<[usize; 3]>,
-}
-
-fn norm(p: V3) -> V3 {
-    let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
-    [p[0] / l, p[1] / l, p[2] / l]
-}
-
-/// Unit icosphere subdivided `level` times (level 3: 1280 faces), outward oriented.
-pub fn icosphere(level: usize) -> Soup {
-    let t = (1.0 + 5f64.sqrt()) / 2.0;
-    let mut v: Vec<V3> = [
-        [-1., t, 0.],
-        [1., t, 0.],
-        [-1., -t, 0.],
-        [1., -t, 0.],
-        [0., -1., t],
-        [0., 1., t],
-        [0., -1., -t],
-        [0., 1., -t],
-        [t, 0., -1.],
-        [t, 0., 1.],
-        [-t, 0., -1.],
-        [-t, 0., 1.],
-    ]
-    .iter()
-    .map(|p| norm(*p))
-    .collect();
-    let mut f: Vec<[usize; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    for _ in 0..level {
-        let mut mid: HashMap<(usize, usize), usize> = HashMap::new();
-        let mut nf = Vec::with_capacity(f.len() * 4);
-        let mut m = |a: usize, b: usize, v: &mut Vec<V3>| -> usize {
-            let key = (a.min(b), a.max(b));
-            *mid.entry(key).or_insert_with(|| {
-                let p = norm([
-                    (v[a][0] + v[b][0]) / 2.0,
-                    (v[a][1] + v[b][1]) / 2.0,
-                    (v[a][2] + v[b][2]) / 2.0,
-                ]);
-                v.push(p);
-                v.len() - 1
-            })
-        };
-        for &[a, b, c] in &f {
-            let ab = m(a, b, &mut v);
-            let bc = m(b, c, &mut v);
-            let ca = m(c, a, &mut v);
-            nf.push([a, ab, ca]);
-            nf.push([b, bc, ab]);
-            nf.push([c, ca, bc]);
-            nf.push([ab, bc, ca]);
-        }
-        f = nf;
-    }
-    Soup { v, f }
-}
+#[path = "shapes.rs"]
+mod shapes;
+pub use shapes::*;
 
 /// Torus with major radius `r1`, minor `r2`, `n` x `m` quads split in two.
 pub fn torus(r1: f64, r2: f64, n: usize, m: usize) -> Soup {
@@ -121,57 +40,9 @@ pub fn torus_distance(p: V3, r1: f64, r2: f64) -> f64 {
     ((q.0 * q.0 + q.1 * q.1).sqrt() - r2).abs()
 }
 
-/// Removes the faces whose centroid lies within `radius` of `center`, then drops
-/// unused vertices. Returns the holed soup and the removed faces (ground truth).
-pub fn cut(s: &Soup, center: V3, radius: f64) -> (Soup, Soup) {
-    let mut keep = Vec::new();
-    let mut gone = Vec::new();
-    for f in &s.f {
-        let c = [0, 1, 2].map(|k| (s.v[f[0]][k] + s.v[f[1]][k] + s.v[f[2]][k]) / 3.0);
-        let d =
-            ((c[0] - center[0]).powi(2) + (c[1] - center[1]).powi(2) + (c[2] - center[2]).powi(2))
-                .sqrt();
-        if d < radius {
-            gone.push(*f);
-        } else {
-            keep.push(*f);
-        }
-    }
-    (compact(&s.v, &keep), compact(&s.v, &gone))
-}
-
-fn compact(v: &[V3], f: &[[usize; 3]]) -> Soup {
-    let mut map = vec![usize::MAX; v.len()];
-    let mut out = Soup::default();
-    for t in f {
-        let mut nt = [0; 3];
-        for k in 0..3 {
-            if map[t[k]] == usize::MAX {
-                map[t[k]] = out.v.len();
-                out.v.push(v[t[k]]);
-            }
-            nt[k] = map[t[k]];
-        }
-        out.f.push(nt);
-    }
-    out
-}
-
-/// OBJ text of a soup (shortest round-trip decimal coordinates).
-pub fn obj_text(s: &Soup) -> String {
-    let mut t = String::new();
-    for p in &s.v {
-        t.push_str(&format!("v {} {} {}\n", p[0], p[1], p[2]));
-    }
-    for f in &s.f {
-        t.push_str(&format!("f {} {} {}\n", f[0] + 1, f[1] + 1, f[2] + 1));
-    }
-    t
-}
-
 /// Writes an OBJ file (shortest round-trip decimal coordinates).
 pub fn write_obj(path: &Path, s: &Soup) {
-    std::fs::write(path, obj_text(s)).expect("write fixture");
+    std::fs::write(path, s.obj_text()).expect("write fixture");
 }
 
 /// Reads back an OBJ written by holefill (v and f lines only).

@@ -1,9 +1,9 @@
 //! Helpers of the daemon's integration tests: start the real binary (`holefill watch`)
-//! on temporary folders, drop meshes, wait with bounded polling, read the logs.
+//! on temporary folders, drop meshes, wait with bounded polling, read the logs. The
+//! test declares `mod common;` beside `mod daemon_support;` (the shapes come from there).
 #![allow(dead_code)]
 
-#[path = "../common/mod.rs"]
-mod common;
+use super::common;
 
 use serde_json::Value;
 use std::fs;
@@ -346,7 +346,7 @@ pub fn wait_until(timeout: Duration, mut cond: impl FnMut() -> bool) -> bool {
 /// count.
 pub fn holed_sphere_obj(level: usize, r: f64) -> (String, usize) {
     let (holed, _) = common::cut(&common::icosphere(level), [0.0, 0.0, 1.0], r);
-    (common::obj_text(&holed), holed.f.len())
+    (holed.obj_text(), holed.f.len())
 }
 
 /// The small test mesh (level 2: 320 faces, a small hole at the pole).

@@ -1,8 +1,10 @@
 //! Helpers of the queue worker's integration tests: a real `nats-server` with
 //! JetStream on a free loopback port and a temporary store, stopped (and its store
-//! removed) when dropped; the real binary as workers, submitter and results taker.
+//! removed) when dropped; the real binary as workers, submitter and results taker. The
+//! test declares `mod common;` and `mod metrics_support;` beside `mod worker_support;`.
 #![allow(dead_code)]
 
+use super::common::{icosphere, Soup};
 use serde_json::Value;
 use std::collections::HashMap;
 use std::fs;
@@ -258,86 +260,17 @@ pub fn wait_until(timeout: Duration, mut cond: impl FnMut() -> bool) -> bool {
 }
 
 /// A small closed sphere with a hole at the pole, made distinct by `i` (a translation),
-/// as OBJ text (level 1: 80 faces before the cut).
+/// as OBJ text (level 1: 80 faces before the cut; every vertex kept).
 pub fn holed_obj(i: usize) -> String {
-    let t = (1.0 + 5f64.sqrt()) / 2.0;
-    let mut v: Vec<[f64; 3]> = [
-        [-1., t, 0.],
-        [1., t, 0.],
-        [-1., -t, 0.],
-        [1., -t, 0.],
-        [0., -1., t],
-        [0., 1., t],
-        [0., -1., -t],
-        [0., 1., -t],
-        [t, 0., -1.],
-        [t, 0., 1.],
-        [-t, 0., -1.],
-        [-t, 0., 1.],
-    ]
-    .to_vec();
-    let f: Vec<[usize; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    for p in v.iter_mut() {
-        let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
-        *p = [p[0] / l + i as f64, p[1] / l, p[2] / l];
-    }
-    // one subdivision
-    let mut mid: HashMap<(usize, usize), usize> = HashMap::new();
-    let mut faces = Vec::new();
-    let mut m = |a: usize, b: usize, v: &mut Vec<[f64; 3]>| -> usize {
-        let k = (a.min(b), a.max(b));
-        *mid.entry(k).or_insert_with(|| {
-            let (p, q) = (v[a], v[b]);
-            let c = [
-                (p[0] + q[0]) / 2.0 - i as f64,
-                (p[1] + q[1]) / 2.0,
-                (p[2] + q[2]) / 2.0,
-            ];
-            let l = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
-            v.push([c[0] / l + i as f64, c[1] / l, c[2] / l]);
-            v.len() - 1
-        })
-    };
-    for [a, b, c] in f {
-        let ab = m(a, b, &mut v);
-        let bc = m(b, c, &mut v);
-        let ca = m(c, a, &mut v);
-        faces.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
-    }
+    let s = icosphere(1);
     // the hole: faces whose centroid is near the north pole (+y)
-    let mut s = String::new();
-    for p in &v {
-        s.push_str(&format!("v {} {} {}\n", p[0], p[1], p[2]));
-    }
-    for [a, b, c] in faces {
-        let cy = (v[a][1] + v[b][1] + v[c][1]) / 3.0;
-        if cy > 0.8 {
-            continue;
-        }
-        s.push_str(&format!("f {} {} {}\n", a + 1, b + 1, c + 1));
-    }
-    s
+    let f =
+        s.f.iter()
+            .copied()
+            .filter(|f| f.iter().map(|&k| s.v[k][1]).sum::<f64>() / 3.0 <= 0.8)
+            .collect();
+    let v = s.v.iter().map(|p| [p[0] + i as f64, p[1], p[2]]).collect();
+    Soup { v, f }.obj_text()
 }
 
 /// Writes `n` distinct holed meshes `sNNN.obj` into `dir`; their paths.
