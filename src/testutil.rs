@@ -68,6 +68,26 @@ pub fn cells_removed(raw: RawMesh, cut: impl Fn(usize, usize) -> bool) -> RawMes
     cut_faces(raw, |c| cut(c.x.floor() as usize, c.y.floor() as usize))
 }
 
+/// An `n x n` sheet of unit cells at height `z` (a [`grid`] over `[0, n]²`) without
+/// the cells `removed` (i, j).
+pub fn sheet(n: usize, z: f64, removed: &[(usize, usize)]) -> RawMesh {
+    cells_removed(grid(n, 0.0, n as f64, |_, _| z), |i, j| {
+        removed.contains(&(i, j))
+    })
+}
+
+/// The 2 x 2 cells of a [`sheet`]'s hole (a loop of 8).
+pub const SHEET_HOLE: [(usize, usize); 4] = [(2, 2), (3, 2), (2, 3), (3, 3)];
+
+/// The loop of 8 vertices around the [`SHEET_HOLE`] of the sheet at height `z`.
+pub fn sheet_hole_at(m: &Mesh, z: f64) -> Vec<VertexId> {
+    m.topo
+        .boundary_loops()
+        .into_iter()
+        .find(|l| l.len() == 8 && l.iter().all(|&u| m.pos(u).z == z))
+        .expect("hole loop")
+}
+
 /// `raw` split along a cut: each vertex for which `on_cut` holds gets a copy, moved by
 /// `offset` and appended (in vertex order), and the faces whose centroid satisfies
 /// `side` use the copies instead: a crack (or, with `offset` zero, a slit) between the

@@ -3,7 +3,7 @@ use super::*;
 use crate::geometry::predicates::tri_tri;
 use crate::io::RawMesh;
 use crate::policy::Checks;
-use crate::testutil;
+use crate::testutil::{self, sheet_hole_at, SHEET_HOLE};
 
 fn v(x: f64, y: f64, z: f64) -> DVec3 {
     DVec3::new(x, y, z)
@@ -27,9 +27,9 @@ fn torus(base: u32) -> Vec<[u32; 3]> {
 #[test]
 fn topology_rejects_extra_closed_components() {
     let mut raw = RawMesh::default();
-    grid(6, 0.0, 0, &HOLE, &mut raw);
+    grid(6, 0.0, 0, &SHEET_HOLE, &mut raw);
     let (m, _) = Mesh::from_raw(&raw);
-    let hole = hole_at(&m, 0.0);
+    let hole = sheet_hole_at(&m, 0.0);
     let mut p = fan(&hole, v(3., 3., 0.));
     check_topology(&m, &hole, &p).unwrap();
     let base = (hole.len() + 1) as u32;
@@ -47,9 +47,9 @@ fn topology_rejects_extra_closed_components() {
 #[test]
 fn topology_rejects_open_and_misoriented_patches() {
     let mut raw = RawMesh::default();
-    grid(6, 0.0, 0, &HOLE, &mut raw);
+    grid(6, 0.0, 0, &SHEET_HOLE, &mut raw);
     let (m, _) = Mesh::from_raw(&raw);
-    let hole = hole_at(&m, 0.0);
+    let hole = sheet_hole_at(&m, 0.0);
     let good = fan(&hole, v(3., 3., 0.));
     let mut open = good.clone();
     open.triangles.pop();
@@ -70,13 +70,7 @@ fn topology_rejects_open_and_misoriented_patches() {
     // the ear at (3,3) would add that edge a second time
     let mut raw = RawMesh::default();
     grid(6, 0.0, 0, &[(2, 2), (3, 2), (3, 3)], &mut raw);
-    let (m, _) = Mesh::from_raw(&raw);
-    let l = m
-        .topo
-        .boundary_loops()
-        .into_iter()
-        .find(|l| l.len() == 8)
-        .unwrap();
+    let (m, l) = testutil::mesh_and_loop(&raw, |_, l| l.len() == 8);
     let k = l.len();
     let i = l.iter().position(|&u| m.pos(u) == v(3., 3., 0.)).unwrap();
     let at = |d: usize| ((i + d) % k) as u32;
@@ -120,21 +114,7 @@ fn topology_rejects_open_and_misoriented_patches() {
 /// `base`, the vertices `raw` has), minus the cells in `removed` (i, j).
 fn grid(n: usize, z: f64, base: u32, removed: &[(usize, usize)], raw: &mut RawMesh) {
     assert_eq!(raw.positions.len(), base as usize);
-    let sheet = testutil::cells_removed(testutil::grid(n, 0.0, n as f64, |_, _| z), |i, j| {
-        removed.contains(&(i, j))
-    });
-    *raw = testutil::joined(std::mem::take(raw), &sheet);
-}
-
-const HOLE: [(usize, usize); 4] = [(2, 2), (3, 2), (2, 3), (3, 3)];
-
-/// The loop of 8 vertices around the 2x2 hole whose centre is (cx, cy, z).
-fn hole_at(m: &Mesh, z: f64) -> Vec<VertexId> {
-    m.topo
-        .boundary_loops()
-        .into_iter()
-        .find(|l| l.len() == 8 && l.iter().all(|&u| m.pos(u).z == z))
-        .expect("hole loop")
+    *raw = testutil::joined(std::mem::take(raw), &testutil::sheet(n, z, removed));
 }
 
 fn fan(hole: &[VertexId], apex: DVec3) -> Patch {
@@ -151,9 +131,9 @@ fn checks() -> Checks {
 #[test]
 fn flat_fan_on_a_grid_hole_is_accepted() {
     let mut raw = RawMesh::default();
-    grid(6, 0.0, 0, &HOLE, &mut raw);
+    grid(6, 0.0, 0, &SHEET_HOLE, &mut raw);
     let (m, _) = Mesh::from_raw(&raw);
-    let hole = hole_at(&m, 0.0);
+    let hole = sheet_hole_at(&m, 0.0);
     let chk = Checker::new(&m);
     let q = chk
         .check_patch(&m, &hole, &fan(&hole, v(3., 3., 0.)), &checks())
@@ -173,10 +153,10 @@ fn flat_fan_on_a_grid_hole_is_accepted() {
 fn patch_poking_through_the_far_side_is_rejected() {
     // a thin shell: the holed sheet at z = 0 and a full sheet 0.3 above it
     let mut raw = RawMesh::default();
-    grid(6, 0.0, 0, &HOLE, &mut raw);
+    grid(6, 0.0, 0, &SHEET_HOLE, &mut raw);
     grid(6, 0.3, 49, &[], &mut raw);
     let (m, _) = Mesh::from_raw(&raw);
-    let hole = hole_at(&m, 0.0);
+    let hole = sheet_hole_at(&m, 0.0);
     let chk = Checker::new(&m);
     chk.check_patch(&m, &hole, &fan(&hole, v(3., 3., 0.1)), &checks())
         .unwrap();
@@ -206,9 +186,9 @@ fn patch_poking_through_the_far_side_is_rejected() {
 #[test]
 fn patch_folding_onto_itself_is_rejected() {
     let mut raw = RawMesh::default();
-    grid(6, 0.0, 0, &HOLE, &mut raw);
+    grid(6, 0.0, 0, &SHEET_HOLE, &mut raw);
     let (m, _) = Mesh::from_raw(&raw);
-    let hole = hole_at(&m, 0.0);
+    let hole = sheet_hole_at(&m, 0.0);
     let k = hole.len() as u32;
     let chk = Checker::new(&m);
     // two apexes; triangles 0..k/2 go to the first, the rest to the second
@@ -250,11 +230,11 @@ fn committed_faces_are_checked() {
     // two holed sheets, the second 0.3 above; fill the upper hole, then a tall
     // fan on the lower hole hits the new faces (before, it passed through)
     let mut raw = RawMesh::default();
-    grid(6, 0.0, 0, &HOLE, &mut raw);
-    grid(6, 0.3, 49, &HOLE, &mut raw);
+    grid(6, 0.0, 0, &SHEET_HOLE, &mut raw);
+    grid(6, 0.3, 49, &SHEET_HOLE, &mut raw);
     let (mut m, _) = Mesh::from_raw(&raw);
-    let lower = hole_at(&m, 0.0);
-    let upper = hole_at(&m, 0.3);
+    let lower = sheet_hole_at(&m, 0.0);
+    let upper = sheet_hole_at(&m, 0.3);
     let mut chk = Checker::new(&m);
     let tall = fan(&lower, v(3., 3., 1.0));
     chk.check_patch(&m, &lower, &tall, &checks()).unwrap();
@@ -282,7 +262,7 @@ fn incremental_index_matches_a_fresh_one() {
     // the checker of the lower sheet alone, then the upper sheet's faces
     // committed in small batches (through the tail and several rebuilds)
     let mut raw = RawMesh::default();
-    grid(6, 0.0, 0, &HOLE, &mut raw);
+    grid(6, 0.0, 0, &SHEET_HOLE, &mut raw);
     let nb = raw.faces.len();
     grid(12, 0.3, 49, &[], &mut raw);
     let (m, _) = Mesh::from_raw(&raw);
@@ -293,7 +273,7 @@ fn incremental_index_matches_a_fresh_one() {
     };
     let (m0, _) = Mesh::from_raw(&lower_raw);
     assert_eq!(m0.topo.faces(), &m.topo.faces()[..nb]);
-    let hole = hole_at(&m, 0.0);
+    let hole = sheet_hole_at(&m, 0.0);
     let fresh = Checker::new(&m);
     let mut inc = Checker::new(&m0);
     inc.tail_max = 64;
@@ -336,14 +316,14 @@ fn scan_and_tree_report_the_canonical_failure() {
     // a grid with a 2x2 hole, an upper sheet and a small tilted sheet crossing the
     // space above the hole
     let mut raw = RawMesh::default();
-    grid(6, 0.0, 0, &HOLE, &mut raw);
+    grid(6, 0.0, 0, &SHEET_HOLE, &mut raw);
     grid(6, 0.7, 49, &[], &mut raw);
     let b = raw.positions.len() as u32;
     raw.positions
         .extend([v(2.2, 2.2, 0.2), v(2.8, 2.2, 0.2), v(2.5, 2.8, 0.5)]);
     raw.faces.push([b, b + 1, b + 2]);
     let (m, _) = Mesh::from_raw(&raw);
-    let hole = hole_at(&m, 0.0);
+    let hole = sheet_hole_at(&m, 0.0);
     let k = hole.len();
     let brute = |p: &Patch| -> Result<(), CheckFailure> {
         let pos = patch_positions(&m, &hole, p);
@@ -459,14 +439,14 @@ fn scan_and_tree_report_the_canonical_failure() {
 fn incremental_checks_report_what_the_whole_check_reports() {
     use rand::{Rng, SeedableRng};
     let mut raw = RawMesh::default();
-    grid(6, 0.0, 0, &HOLE, &mut raw);
+    grid(6, 0.0, 0, &SHEET_HOLE, &mut raw);
     grid(6, 0.7, 49, &[], &mut raw);
     let b = raw.positions.len() as u32;
     raw.positions
         .extend([v(2.2, 2.2, 0.2), v(2.8, 2.2, 0.2), v(2.5, 2.8, 0.5)]);
     raw.faces.push([b, b + 1, b + 2]);
     let (m, _) = Mesh::from_raw(&raw);
-    let hole = hole_at(&m, 0.0);
+    let hole = sheet_hole_at(&m, 0.0);
     let k = hole.len();
     let opts = checks();
     let checker = Checker::new(&m);

@@ -73,15 +73,8 @@ fn planar_with_hole(poly: &[DVec2], h: f64, lo: f64, hi: f64) -> (Mesh, Vec<Vert
             c.fix().index() as u32,
         ]);
     }
-    let (mesh, _) = Mesh::from_raw(&raw);
-    mesh.validate().unwrap();
-    let lp = mesh
-        .topo
-        .boundary_loops()
-        .into_iter()
-        .find(|l| l.contains(&VertexId(handles[0].index() as u32)))
-        .unwrap();
-    (mesh, lp)
+    let first = VertexId(handles[0].index() as u32);
+    testutil::mesh_and_loop(&raw, |_, l| l.contains(&first))
 }
 
 fn dist_to_poly(poly: &[DVec2], q: DVec2) -> f64 {
@@ -636,14 +629,7 @@ fn slit_gives_a_clean_error() {
         DVec3::ZERO,
         |c| c.y > 4.0,
     );
-    let (mesh, _) = Mesh::from_raw(&raw);
-    mesh.validate().unwrap();
-    let lp = mesh
-        .topo
-        .boundary_loops()
-        .into_iter()
-        .find(|l| l.len() != 4 * n)
-        .unwrap();
+    let (mesh, lp) = testutil::mesh_and_loop(&raw, |_, l| l.len() != 4 * n);
     assert_eq!(lp.len(), 12);
     let (hole, r) = run(&mesh, &lp, &Policy::default());
     match r {

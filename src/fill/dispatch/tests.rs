@@ -3,35 +3,15 @@
 //! patches falling through to the next method.
 
 use super::*;
-use crate::io::RawMesh;
 use crate::policy::Checks;
 use crate::testutil::{
-    cells_removed, cut_faces, cylinder_with_hole, fan, grid, joined, mesh_and_loop,
-    sphere_cap_removed,
+    cut_faces, cylinder_with_hole, fan, grid, joined, mesh_and_loop, sheet, sheet_hole_at,
+    sphere_cap_removed, SHEET_HOLE,
 };
 use glam::DVec3;
 
 fn v(x: f64, y: f64, z: f64) -> DVec3 {
     DVec3::new(x, y, z)
-}
-
-/// An `n x n` sheet of unit cells at height `z` without the cells `removed` (i, j).
-fn sheet(n: usize, z: f64, removed: &[(usize, usize)]) -> RawMesh {
-    cells_removed(grid(n, 0.0, n as f64, |_, _| z), |i, j| {
-        removed.contains(&(i, j))
-    })
-}
-
-/// The 2 x 2 cells of the sheets' hole.
-const HOLE: [(usize, usize); 4] = [(2, 2), (3, 2), (2, 3), (3, 3)];
-
-/// The loop of 8 vertices around the 2 x 2 hole at height `z`.
-fn hole_at(m: &Mesh, z: f64) -> Vec<crate::mesh::VertexId> {
-    m.topo
-        .boundary_loops()
-        .into_iter()
-        .find(|l| l.len() == 8 && l.iter().all(|&u| m.pos(u).z == z))
-        .expect("hole loop")
 }
 
 fn checks() -> Checks {
@@ -57,10 +37,10 @@ fn a_proposal_that_meets_an_earlier_patch_fails_over_to_the_next_method() {
     // the parallel phase checked the tall fan on the lower hole against the mesh
     // as read (clean); the upper hole's lid was accepted first, and the fan pokes
     // through it: the serial phase must reject it and try the next method
-    let raw = joined(sheet(6, 0.0, &HOLE), &sheet(6, 0.3, &HOLE));
+    let raw = joined(sheet(6, 0.0, &SHEET_HOLE), &sheet(6, 0.3, &SHEET_HOLE));
     let (mut m, _) = Mesh::from_raw(&raw);
-    let lower = hole_at(&m, 0.0);
-    let upper = hole_at(&m, 0.3);
+    let lower = sheet_hole_at(&m, 0.0);
+    let upper = sheet_hole_at(&m, 0.3);
     let policy = Policy::default();
     let mut chk = Checker::new(&m);
     let tall = fan(lower.len(), v(3., 3., 1.0));

@@ -283,13 +283,7 @@ mod tests {
             |i, j| (2..6).contains(&i) && (2..6).contains(&j),
         );
         let id = |i: u32, j: u32| j * n + i;
-        let (mesh, _) = Mesh::from_raw(&raw);
-        let lp = mesh
-            .topo
-            .boundary_loops()
-            .into_iter()
-            .find(|l| l.len() == 16)
-            .expect("inner hole");
+        let (mesh, lp) = crate::testutil::mesh_and_loop(&raw, |_, l| l.len() == 16);
         let hole = Hole::new(0, &mesh, lp, &Policy::default());
         let k = hole.len() as u32;
         // patch index of grid vertex (i, j): its place in the loop, else a new vertex
