@@ -267,15 +267,9 @@ pub fn smooth(mesh: &mut Mesh, opts: &Smooth) -> SmoothingReport {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::io::RawMesh;
-    use crate::testutil::{cells_removed, grid};
+    use crate::testutil::{cells_removed, grid, unit_grid};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
-
-    /// A unit icosphere subdivided `levels` times (outward faces).
-    fn icosphere(levels: usize) -> RawMesh {
-        crate::testutil::icosphere(levels, 1.0)
-    }
 
     fn volume(m: &Mesh) -> f64 {
         m.topo
@@ -299,7 +293,7 @@ mod tests {
 
     /// A unit icosphere (level 3, 642 vertices) with radial noise of up to ±3 %.
     fn noisy_sphere() -> Mesh {
-        let mut raw = icosphere(3);
+        let mut raw = crate::testutil::icosphere(3, 1.0);
         let mut rng = ChaCha8Rng::seed_from_u64(1);
         for p in &mut raw.positions {
             *p *= 1.0 + rng.random_range(-0.03..0.03);
@@ -399,7 +393,7 @@ mod tests {
 
     /// A flat 16 x 16 grid with the 8 x 2 cells (4..12, 7..9) removed.
     fn slot_grid() -> Mesh {
-        let raw = cells_removed(grid(16, 0.0, 16.0, |_, _| 0.0), |i, j| {
+        let raw = cells_removed(unit_grid(16), |i, j| {
             (4..12).contains(&i) && (7..9).contains(&j)
         });
         Mesh::from_raw(&raw).0

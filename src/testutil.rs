@@ -15,6 +15,11 @@ pub fn grid(n: usize, lo: f64, hi: f64, z: impl FnMut(f64, f64) -> f64) -> RawMe
     grid_cut(n, lo, hi, z, false)
 }
 
+/// A flat [`grid`] of `n x n` unit cells: over `[0, n]²`, in z = 0.
+pub fn unit_grid(n: usize) -> RawMesh {
+    grid(n, 0.0, n as f64, |_, _| 0.0)
+}
+
 /// The [`grid`] with the diagonals alternating, so that no direction is preferred: a
 /// cell `(i, j)` with `i + j` odd is cut from `(i + 1, j)` to `(i, j + 1)` instead.
 pub fn grid_alternating(n: usize, lo: f64, hi: f64, z: impl FnMut(f64, f64) -> f64) -> RawMesh {
@@ -179,7 +184,18 @@ pub fn cylinder(
     raw
 }
 
-/// The staggered unit [`cylinder`] with a hole on its side: the faces whose centroid has
+/// The staggered [`cylinder`] of radius 1 from z = 0 up: `seg` vertices a ring, `rings`
+/// rings, near-equilateral triangles.
+pub fn unit_cylinder(seg: usize, rings: usize) -> RawMesh {
+    cylinder(1.0, seg, rings, unit_cylinder_dz(seg), 0.0, true)
+}
+
+/// The ring spacing of a [`unit_cylinder`].
+fn unit_cylinder_dz(seg: usize) -> f64 {
+    2.0 * std::f64::consts::PI / seg as f64 * 0.866
+}
+
+/// The [`unit_cylinder`] with a hole on its side: the faces whose centroid has
 /// `|angle| < half_angle` and `|z - zc| < half_height` (`zc` the middle height)
 /// removed. Returns the mesh and the hole's loop.
 pub fn cylinder_with_hole(
@@ -188,9 +204,8 @@ pub fn cylinder_with_hole(
     half_angle: f64,
     half_height: f64,
 ) -> (Mesh, Vec<VertexId>) {
-    let dz = 2.0 * std::f64::consts::PI / seg as f64 * 0.866;
-    let zc = (rings - 1) as f64 * dz * 0.5;
-    let raw = cut_faces(cylinder(1.0, seg, rings, dz, 0.0, true), |c| {
+    let zc = (rings - 1) as f64 * unit_cylinder_dz(seg) * 0.5;
+    let raw = cut_faces(unit_cylinder(seg, rings), |c| {
         c.y.atan2(c.x).abs() < half_angle && (c.z - zc).abs() < half_height
     });
     mesh_and_loop(&raw, |_, l| l.len() != seg)

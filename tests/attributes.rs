@@ -310,13 +310,7 @@ fn textured_obj(s: &Soup) -> String {
 
 /// Faces whose centroid is above `z`.
 fn upper(s: &Soup, z: f64) -> Soup {
-    let f: Vec<[usize; 3]> =
-        s.f.iter()
-            .copied()
-            .filter(|f| f.iter().map(|&i| s.v[i][2]).sum::<f64>() / 3.0 > z)
-            .collect();
-    let (kept, _) = cut(&Soup { v: s.v.clone(), f }, [9.0, 9.0, 9.0], 0.0);
-    kept
+    s.remove_faces(|c, _| c[2] <= z)
 }
 
 #[test]

@@ -213,9 +213,9 @@ mod tests {
     /// L-shaped notch, and one rim vertex is lifted so that the loop is far from flat.
     #[test]
     fn closes_a_notched_loop_that_others_find_hard() {
-        use crate::testutil::{cells_removed, grid};
+        use crate::testutil::{cells_removed, unit_grid};
         // remove cells (1..5, 1..3) and (1..3, 3..5): an L-shaped hole
-        let mut raw = cells_removed(grid(6, 0.0, 6.0, |_, _| 0.0), |i, j| {
+        let mut raw = cells_removed(unit_grid(6), |i, j| {
             (1..5).contains(&i) && (1..5).contains(&j) && (j < 3 || i < 3)
         });
         raw.positions[4 * 7 + 4].z = 0.6; // the reflex corner of the L, lifted

@@ -634,16 +634,11 @@ impl Mesh {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::io::RawMesh;
-    use crate::testutil::{cells_removed, mesh_and_loop};
-
-    fn grid(n: usize) -> RawMesh {
-        crate::testutil::grid(n, 0.0, n as f64, |_, _| 0.0)
-    }
+    use crate::testutil::{cells_removed, mesh_and_loop, unit_grid};
 
     #[test]
     fn grid_has_one_boundary_loop() {
-        let (m, rep) = Mesh::from_raw(&grid(4));
+        let (m, rep) = Mesh::from_raw(&unit_grid(4));
         m.validate().unwrap();
         assert_eq!(rep.flipped_faces, 0);
         let loops = m.topo.boundary_loops();
@@ -663,7 +658,7 @@ mod tests {
     #[test]
     fn fill_a_hole_by_adding_faces() {
         // remove the two faces of the cell (1,1)
-        let raw = cells_removed(grid(4), |i, j| (i, j) == (1, 1));
+        let raw = cells_removed(unit_grid(4), |i, j| (i, j) == (1, 1));
         let (mut m, _) = Mesh::from_raw(&raw);
         m.validate().unwrap();
         let loops = m.topo.boundary_loops();
@@ -682,7 +677,7 @@ mod tests {
 
     /// The grid of [`grid`]`(4)` with the cells (1,1) and (2,1) removed: a hole of 6.
     fn grid_with_hole() -> (Mesh, Vec<VertexId>) {
-        let raw = cells_removed(grid(4), |i, j| j == 1 && (1..=2).contains(&i));
+        let raw = cells_removed(unit_grid(4), |i, j| j == 1 && (1..=2).contains(&i));
         mesh_and_loop(&raw, |_, l| l.len() == 6)
     }
 

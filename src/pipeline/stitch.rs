@@ -300,7 +300,7 @@ pub fn stitch(mesh: &Mesh, tolerance: f64) -> Option<Stitched> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testutil::{grid, split_along};
+    use crate::testutil::{split_along, unit_grid};
     use glam::DVec3;
 
     /// A 6x6 grid cut along x = 3 into two halves with their own vertices on the cut
@@ -308,7 +308,7 @@ mod tests {
     /// `gap` in x.
     fn cracked(gap: f64) -> RawMesh {
         split_along(
-            grid(6, 0.0, 6.0, |_, _| 0.0),
+            unit_grid(6),
             |p| p.x == 3.0,
             DVec3::new(gap, 0.0, 0.0),
             |c| c.x > 3.0,
@@ -354,7 +354,7 @@ mod tests {
         // 1 <= y <= 4 use copies of its inner vertices on the right: one loop of zero
         // area
         let raw = split_along(
-            grid(6, 0.0, 6.0, |_, _| 0.0),
+            unit_grid(6),
             |p| p.x == 3.0 && p.y > 1.0 && p.y < 4.0,
             DVec3::ZERO,
             |c| c.x > 3.0 && c.y > 1.0 && c.y < 4.0,

@@ -293,15 +293,12 @@ proptest! {
 /// of their own, with no vertex shared with the rest).
 fn holed_grid(n: usize, hole: f64, islands: &[([f64; 2], f64)]) -> RawMesh {
     let c = n as f64 / 2.0;
-    crate::testutil::cells_removed(
-        crate::testutil::grid(n, 0.0, n as f64, |_, _| 0.0),
-        |i, j| {
-            let (x, y) = (i as f64 + 0.5, j as f64 + 0.5);
-            let in_hole = (x - c).hypot(y - c) < hole;
-            let on_island = islands.iter().any(|(p, r)| (x - p[0]).hypot(y - p[1]) < *r);
-            in_hole && !on_island
-        },
-    )
+    crate::testutil::cells_removed(crate::testutil::unit_grid(n), |i, j| {
+        let (x, y) = (i as f64 + 0.5, j as f64 + 0.5);
+        let in_hole = (x - c).hypot(y - c) < hole;
+        let on_island = islands.iter().any(|(p, r)| (x - p[0]).hypot(y - p[1]) < *r);
+        in_hole && !on_island
+    })
 }
 
 fn island_policy(mode: IslandMode, below: usize) -> Policy {

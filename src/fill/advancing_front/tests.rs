@@ -104,7 +104,7 @@ fn resample(corners: &[DVec2], h: f64) -> Vec<DVec2> {
 /// A grid of `n x n` unit cells (z = 0) with every face whose centroid satisfies
 /// `cut` removed.
 fn grid_with_hole(n: usize, cut: impl Fn(DVec3) -> bool) -> (Mesh, Vec<VertexId>) {
-    let raw = testutil::cut_faces(testutil::grid(n, 0.0, n as f64, |_, _| 0.0), cut);
+    let raw = testutil::cut_faces(testutil::unit_grid(n), cut);
     testutil::mesh_and_loop(&raw, |_, l| l.len() != 4 * n)
 }
 
@@ -624,7 +624,7 @@ fn slit_gives_a_clean_error() {
     let n = 8;
     // copies of (2..=6, 4) for the faces above the cut
     let raw = testutil::split_along(
-        testutil::grid(n, 0.0, n as f64, |_, _| 0.0),
+        testutil::unit_grid(n),
         |p| p.y == 4.0 && (2.0..=6.0).contains(&p.x),
         DVec3::ZERO,
         |c| c.y > 4.0,

@@ -122,8 +122,8 @@ mod tests {
     /// rim is pulled across the hole, so the faces around it fold over the hole (the
     /// methods may or may not close it as it is; trimmed, it is a plain hole).
     fn folded_rim() -> RawMesh {
-        use crate::testutil::{cells_removed, grid};
-        let mut raw = cells_removed(grid(8, 0.0, 8.0, |_, _| 0.0), |i, j| {
+        use crate::testutil::{cells_removed, unit_grid};
+        let mut raw = cells_removed(unit_grid(8), |i, j| {
             (3..5).contains(&i) && (3..5).contains(&j)
         });
         // vertex (3, 4) of the loop pulled across the hole to (4.6, 4, 0.02)

@@ -5,8 +5,8 @@
 use super::*;
 use crate::policy::Checks;
 use crate::testutil::{
-    cut_faces, cylinder_with_hole, fan, grid, joined, mesh_and_loop, sheet, sheet_hole_at,
-    sphere_cap_removed, SHEET_HOLE,
+    cut_faces, cylinder_with_hole, fan, joined, mesh_and_loop, sheet, sheet_hole_at,
+    sphere_cap_removed, unit_grid, SHEET_HOLE,
 };
 use glam::DVec3;
 
@@ -129,7 +129,7 @@ fn dispatcher_rejects_a_fan_through_an_obstacle_and_fills_without_it() {
 #[test]
 fn dispatcher_fills_a_large_hole_with_the_front() {
     let c = DVec3::new(15.0, 15.0, 0.0);
-    let raw = cut_faces(grid(30, 0.0, 30.0, |_, _| 0.0), |p| (p - c).length() < 9.0);
+    let raw = cut_faces(unit_grid(30), |p| (p - c).length() < 9.0);
     let (mut mesh, lp) = mesh_and_loop(&raw, |_, l| l.len() != 4 * 30);
     // paper 002's list for large holes (the default puts wavefront first)
     let policy = Policy::default()

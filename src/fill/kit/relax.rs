@@ -278,10 +278,9 @@ mod tests {
     /// cells (9 new vertices), each new vertex pushed off its grid point in the plane.
     fn grid_hole() -> (Mesh, Hole, Patch, Vec<DVec3>) {
         let n = 9u32;
-        let raw = crate::testutil::cells_removed(
-            crate::testutil::grid(8, 0.0, 8.0, |_, _| 0.0),
-            |i, j| (2..6).contains(&i) && (2..6).contains(&j),
-        );
+        let raw = crate::testutil::cells_removed(crate::testutil::unit_grid(8), |i, j| {
+            (2..6).contains(&i) && (2..6).contains(&j)
+        });
         let id = |i: u32, j: u32| j * n + i;
         let (mesh, lp) = crate::testutil::mesh_and_loop(&raw, |_, l| l.len() == 16);
         let hole = Hole::new(0, &mesh, lp, &Policy::default());

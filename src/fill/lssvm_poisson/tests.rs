@@ -39,18 +39,6 @@ fn cut_mesh(raw: RawMesh, cut: impl Fn(DVec3) -> bool, centre: DVec3) -> (Mesh, 
     (mesh, lp)
 }
 
-/// A flat grid of `n x n` unit cells.
-fn grid(n: usize) -> RawMesh {
-    testutil::grid(n, 0.0, n as f64, |_, _| 0.0)
-}
-
-/// Open unit cylinder about the z axis, `around` vertices a ring, `rows` rows of
-/// near-equilateral triangles.
-fn cylinder(around: usize, rows: usize) -> RawMesh {
-    let dz = std::f64::consts::TAU / around as f64 * 0.866;
-    testutil::cylinder(1.0, around, rows + 1, dz, 0.0, true)
-}
-
 struct Run {
     patch: Patch,
     front: Patch,
@@ -92,7 +80,7 @@ fn mean_max(v: impl Iterator<Item = f64>) -> (f64, f64) {
 
 #[test]
 fn planar_hole_gives_planar_patch() {
-    let raw = grid(24);
+    let raw = testutil::unit_grid(24);
     let c = DVec3::new(12.3, 11.8, 0.0);
     let (mesh, lp) = cut_mesh(raw, |p| (p - c).length() < 5.0, c);
     let r = run(&mesh, &lp, &Policy::default());
@@ -161,7 +149,7 @@ fn sphere_hole_100() {
 
 #[test]
 fn cylinder_hole() {
-    let raw = cylinder(64, 40);
+    let raw = testutil::unit_cylinder(64, 41);
     let c = DVec3::new(1.0, 0.05, 1.7);
     let (mesh, lp) = cut_mesh(raw, |p| (p - c).length() < 0.45, c);
     let r = run(&mesh, &lp, &Policy::default());
@@ -236,7 +224,7 @@ fn same_input_same_bits() {
 fn poisson_has_linear_precision_and_reuses_its_factorisation() {
     // on a plane the cotangent Laplacian of the positions is zero: solving for a zero
     // target on the true geometry must give it back, with and without the ring rows
-    let raw = grid(16);
+    let raw = testutil::unit_grid(16);
     let c = DVec3::new(8.2, 7.9, 0.0);
     let (mesh, lp) = cut_mesh(raw, |p| (p - c).length() < 3.5, c);
     let r = run(&mesh, &lp, &Policy::default());
@@ -289,7 +277,7 @@ fn lssvm_reproduces_a_smooth_field() {
 #[test]
 fn small_loops_close() {
     // one removed grid cell (4 vertices, no new vertex needed) and a removed vertex star
-    let full = grid(6);
+    let full = testutil::unit_grid(6);
     let raw = testutil::cells_removed(full.clone(), |i, j| (i, j) == (2, 2));
     let (mesh, lp) = testutil::mesh_and_loop(&raw, |_, l| l.len() == 4);
     let r = run(&mesh, &lp, &Policy::default());

@@ -8,7 +8,7 @@ use crate::patch::{apply_patch, Hole};
 use crate::policy::{Policy, TriangulationWeight, Weights};
 use proptest::prelude::*;
 
-use crate::testutil::{cut_faces, cylinder, grid, icosphere};
+use crate::testutil::{cut_faces, cylinder, icosphere, unit_grid};
 
 /// The mesh and the hole whose loop satisfies `pick` (the only such loop).
 fn mesh_and_hole(raw: &RawMesh, pick: impl Fn(&Mesh, &[VertexId]) -> bool) -> (Mesh, Hole, Policy) {
@@ -60,9 +60,7 @@ fn q_share(mesh: &Mesh, hole: &Hole, patch: &Patch) -> f64 {
 /// Grid of (n+1)^2 vertices on z = 0 with the cells within `rad` of the centre removed.
 fn planar_grid_hole(n: usize, rad: f64) -> RawMesh {
     let c = DVec3::new(n as f64 / 2.0, n as f64 / 2.0, 0.0);
-    cut_faces(grid(n, 0.0, n as f64, |_, _| 0.0), |p| {
-        (p - c).length() < rad
-    })
+    cut_faces(unit_grid(n), |p| (p - c).length() < rad)
 }
 
 fn interior_loop(n: usize) -> impl Fn(&Mesh, &[VertexId]) -> bool {

@@ -4,10 +4,9 @@ use crate::io::attrs::Values;
 /// A planar grid (n x n quads) with the faces of one inner square removed.
 fn holed_grid(n: usize) -> RawMesh {
     let inner = n / 2 - 1..=n / 2;
-    crate::testutil::cells_removed(
-        crate::testutil::grid(n, 0.0, n as f64, |_, _| 0.0),
-        |i, j| inner.contains(&i) && inner.contains(&j),
-    )
+    crate::testutil::cells_removed(crate::testutil::unit_grid(n), |i, j| {
+        inner.contains(&i) && inner.contains(&j)
+    })
 }
 
 #[test]

@@ -181,7 +181,7 @@ fn a_folded_quad_takes_its_other_diagonal() {
 
 /// A flat grid with `extra` flaps hinged on one interior edge (4 to 6 faces on it).
 fn grid_with_fan(extra: usize, connected: bool) -> RawMesh {
-    let mut raw = crate::testutil::grid(4, 0.0, 4.0, |_, _| 0.0);
+    let mut raw = crate::testutil::unit_grid(4);
     // the interior edge 6-12 of the 5x5 vertex grid (the diagonal of cell (1,1))
     let (u, w) = (6u32, 12u32);
     for k in 0..extra {
@@ -221,10 +221,9 @@ fn fans_of_four_to_six_faces_on_one_edge_are_resolved() {
 #[test]
 fn a_pinched_boundary_vertex_is_split() {
     // a grid with two holes touching at vertex 12 (cells (1,1) and (2,2))
-    let raw =
-        crate::testutil::cells_removed(crate::testutil::grid(4, 0.0, 4.0, |_, _| 0.0), |i, j| {
-            [(1, 1), (2, 2)].contains(&(i, j))
-        });
+    let raw = crate::testutil::cells_removed(crate::testutil::unit_grid(4), |i, j| {
+        [(1, 1), (2, 2)].contains(&(i, j))
+    });
     let (m, rep) = Mesh::from_raw(&raw);
     m.validate().unwrap();
     assert_eq!(rep.non_manifold_vertices, 1);
