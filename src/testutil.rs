@@ -93,6 +93,25 @@ pub fn sheet_hole_at(m: &Mesh, z: f64) -> Vec<VertexId> {
         .expect("hole loop")
 }
 
+/// A strip of one ring of quads between the closed loops `inner` and `outer` (as many
+/// points each, `outer[i]` across from `inner[i]`): the inner loop's vertices first,
+/// then the outer's; quad `i` cut from `inner[i]` to `outer[i + 1]`, faces up for an
+/// inner loop counter-clockwise inside the outer one.
+pub fn strip(inner: &[DVec3], outer: &[DVec3]) -> RawMesh {
+    assert_eq!(inner.len(), outer.len());
+    let k = inner.len();
+    let mut raw = RawMesh::default();
+    raw.positions.extend_from_slice(inner);
+    raw.positions.extend_from_slice(outer);
+    for i in 0..k {
+        let j = (i + 1) % k;
+        let (vi, vj, ui, uj) = (i as u32, j as u32, (k + i) as u32, (k + j) as u32);
+        raw.faces.push([vi, ui, uj]);
+        raw.faces.push([vi, uj, vj]);
+    }
+    raw
+}
+
 /// `raw` split along a cut: each vertex for which `on_cut` holds gets a copy, moved by
 /// `offset` and appended (in vertex order), and the faces whose centroid satisfies
 /// `side` use the copies instead: a crack (or, with `offset` zero, a slit) between the

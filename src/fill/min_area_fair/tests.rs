@@ -8,7 +8,7 @@ use crate::patch::{apply_patch, Hole};
 use crate::policy::{Policy, TriangulationWeight, Weights};
 use proptest::prelude::*;
 
-use crate::testutil::{cut_faces, cylinder, icosphere, unit_grid};
+use crate::testutil::{cut_faces, cylinder, icosphere, strip, unit_grid};
 
 /// The mesh and the hole whose loop satisfies `pick` (the only such loop).
 fn mesh_and_hole(raw: &RawMesh, pick: impl Fn(&Mesh, &[VertexId]) -> bool) -> (Mesh, Hole, Policy) {
@@ -215,30 +215,21 @@ fn higher_continuity_fits_the_sphere_better_than_membrane() {
     assert!(errs[2] < errs[0] / 3.0, "{errs:?}");
 }
 
-/// A loop with no surrounding mesh but its own ring: an annulus of one strip.
+/// A loop with no surrounding mesh but its own ring: an annulus of one strip, faces up.
 fn annulus(k: usize, wave: f64) -> (Mesh, Hole, Policy) {
-    let mut raw = RawMesh::default();
-    for i in 0..k {
-        let t = i as f64 / k as f64 * std::f64::consts::TAU;
-        let r = k as f64 / std::f64::consts::TAU;
-        let z = wave * r * (2.0 * t).cos() * 0.3;
-        raw.positions.push(DVec3::new(r * t.cos(), r * t.sin(), z));
-        raw.positions
-            .push(DVec3::new((r + 1.0) * t.cos(), (r + 1.0) * t.sin(), z));
-    }
-    for i in 0..k {
-        let j = (i + 1) % k;
-        let (a, b, c, d) = (
-            2 * i as u32,
-            2 * j as u32,
-            2 * j as u32 + 1,
-            2 * i as u32 + 1,
-        );
-        raw.faces.push([a, b, c]);
-        raw.faces.push([a, c, d]);
-    }
+    let r = k as f64 / std::f64::consts::TAU;
+    let circle = |radius: f64| -> Vec<DVec3> {
+        (0..k)
+            .map(|i| {
+                let t = i as f64 / k as f64 * std::f64::consts::TAU;
+                let z = wave * r * (2.0 * t).cos() * 0.3;
+                DVec3::new(radius * t.cos(), radius * t.sin(), z)
+            })
+            .collect()
+    };
+    let raw = strip(&circle(r), &circle(r + 1.0));
     mesh_and_hole(&raw, |m, l| {
-        l.iter().all(|&v| v.idx() % 2 == 0 && m.pos(v).is_finite())
+        l.iter().all(|&v| v.idx() < k && m.pos(v).is_finite())
     })
 }
 

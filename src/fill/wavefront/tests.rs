@@ -296,26 +296,19 @@ fn interpolated_placement_is_closer_on_curved_holes() {
 /// A flat annulus: the loop `loop_pts` (counter-clockwise, star-shaped around the
 /// origin) inside a ring of faces out to radius `outer`; the loop is the hole.
 fn ring_mesh(loop_pts: &[DVec3], outer: f64) -> Option<RawMesh> {
-    let k = loop_pts.len();
-    let mut raw = RawMesh::default();
-    raw.positions.extend_from_slice(loop_pts);
-    for p in loop_pts {
-        let d = DVec3::new(p.x, p.y, 0.0).normalize();
-        raw.positions
-            .push(DVec3::new(d.x * outer, d.y * outer, p.z));
-    }
-    for i in 0..k {
-        let j = (i + 1) % k;
-        let (vi, vj, ui, uj) = (i as u32, j as u32, (k + i) as u32, (k + j) as u32);
-        for f in [[vi, ui, uj], [vi, uj, vj]] {
-            let [a, b, c] = f.map(|x| raw.positions[x as usize]);
-            if (b - a).cross(c - a).z <= 1e-9 {
-                return None;
-            }
-            raw.faces.push(f);
-        }
-    }
-    Some(raw)
+    let ring: Vec<DVec3> = loop_pts
+        .iter()
+        .map(|p| {
+            let d = DVec3::new(p.x, p.y, 0.0).normalize();
+            DVec3::new(d.x * outer, d.y * outer, p.z)
+        })
+        .collect();
+    let raw = testutil::strip(loop_pts, &ring);
+    let up = |f: &[u32; 3]| {
+        let [a, b, c] = f.map(|x| raw.positions[x as usize]);
+        (b - a).cross(c - a).z > 1e-9
+    };
+    raw.faces.iter().all(up).then_some(raw)
 }
 
 fn circle(k: usize, r: f64) -> Vec<DVec3> {
