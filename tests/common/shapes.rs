@@ -1,11 +1,13 @@
 //! The shapes of the integration tests, in one place: a triangle soup and its OBJ
-//! text, the icosphere and the grid, and faces cut away. Included by
+//! text, the icosphere (built by the unit tests' `src/testutil/icosahedron.rs`) and the
+//! grid, and faces cut away. Included by
 //! `tests/common/mod.rs` (re-exported there, for the tests and `tests/*_support`) and
 //! by `tests/common/holes.rs` (which the bench `examples/hole_bench.rs` includes too),
 //! each with `#[path = "shapes.rs"] mod shapes;`.
 #![allow(dead_code)]
 
-use std::collections::HashMap;
+#[path = "../../src/testutil/icosahedron.rs"]
+mod icosahedron;
 
 pub type V3 = [f64; 3];
 
@@ -82,75 +84,10 @@ pub fn cut(s: &Soup, center: V3, radius: f64) -> (Soup, Soup) {
 
 /// A unit icosphere subdivided `level` times (level 3: 1280 faces), outward oriented.
 pub fn icosphere(level: usize) -> Soup {
-    let t = (1.0 + 5f64.sqrt()) / 2.0;
-    let norm = |p: V3| {
+    let (v, f) = icosahedron::icosphere(level, |p| {
         let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
         [p[0] / l, p[1] / l, p[2] / l]
-    };
-    let mut v: Vec<V3> = [
-        [-1., t, 0.],
-        [1., t, 0.],
-        [-1., -t, 0.],
-        [1., -t, 0.],
-        [0., -1., t],
-        [0., 1., t],
-        [0., -1., -t],
-        [0., 1., -t],
-        [t, 0., -1.],
-        [t, 0., 1.],
-        [-t, 0., -1.],
-        [-t, 0., 1.],
-    ]
-    .iter()
-    .map(|p| norm(*p))
-    .collect();
-    let mut f: Vec<[usize; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    for _ in 0..level {
-        let mut mid: HashMap<(usize, usize), usize> = HashMap::new();
-        let mut nf = Vec::with_capacity(f.len() * 4);
-        for &[a, b, c] in &f {
-            let mut m = |a: usize, b: usize| -> usize {
-                *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                    let p = norm([
-                        (v[a][0] + v[b][0]) / 2.0,
-                        (v[a][1] + v[b][1]) / 2.0,
-                        (v[a][2] + v[b][2]) / 2.0,
-                    ]);
-                    v.push(p);
-                    v.len() - 1
-                })
-            };
-            let ab = m(a, b);
-            let bc = m(b, c);
-            let ca = m(c, a);
-            nf.push([a, ab, ca]);
-            nf.push([b, bc, ab]);
-            nf.push([c, ca, bc]);
-            nf.push([ab, bc, ca]);
-        }
-        f = nf;
-    }
+    });
     Soup { v, f }
 }
 
