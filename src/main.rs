@@ -277,10 +277,7 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
     // repaired: a job on the fill's pool, which its worker, waiting for the fill,
     // takes at once (with one thread there is no pool: the picture is drawn after).
     let picture_opts = holefill::picture::Options::default();
-    let threads = match policy.limits.threads {
-        0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
-        n => n,
-    };
+    let threads = policy.limits.fill_threads();
     let mut sketch: Option<(holefill::picture::Sketch, Duration)> = None;
     // an internal error (a bug) must still end in a clear message and EX_SOFTWARE,
     // with nothing written, rather than an abort

@@ -23,7 +23,7 @@ use std::fs;
 use std::io;
 use std::os::unix::ffi::OsStrExt;
 use std::os::unix::fs::{MetadataExt, OpenOptionsExt, PermissionsExt};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::{SystemTime, UNIX_EPOCH};
 
 /// The longest file name of Linux file systems, in bytes.
@@ -204,6 +204,31 @@ pub fn publish(src: &Path, dst: &Path, rule: Collision) -> io::Result<()> {
         Collision::Timestamp => rename_noreplace(src, dst),
         Collision::Overwrite => fs::rename(src, dst),
     }
+}
+
+/// Writes `bytes` as `path` durably: through `path.tmp` (a stale one removed first,
+/// created anew with `mode`, never through a symlink), fsync, rename. On an error the
+/// temporary file is removed. Returns the file, as written.
+pub fn write_durably(path: &Path, bytes: &[u8], mode: u32) -> io::Result<fs::File> {
+    use std::io::Write;
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = PathBuf::from(tmp);
+    let _ = fs::remove_file(&tmp);
+    let mut f = fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .mode(mode)
+        .custom_flags(libc::O_NOFOLLOW)
+        .open(&tmp)?;
+    let r = f
+        .write_all(bytes)
+        .and_then(|()| f.sync_all())
+        .and_then(|()| fs::rename(&tmp, path));
+    if r.is_err() {
+        let _ = fs::remove_file(&tmp);
+    }
+    r.map(|()| f)
 }
 
 /// A file name as it may be written into a journal line or a log: control and other

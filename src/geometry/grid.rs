@@ -1,115 +1,163 @@
-//! A uniform grid over a plane: the broad phase with which the wavefront finds the
-//! front nodes and the triangles near a step.
+//! A uniform grid of boxes in space, hashed by cell: the broad phase with which the
+//! fronts (the advancing front and the wavefront) find the front nodes and the
+//! triangles near a step.
 
+use crate::fasthash::FxMap;
 use glam::DVec3;
 
 /// An id whose box spans more cells than this is not stored (the caller keeps such
 /// ids apart and tests them every time).
 pub const MAX_CELLS: i64 = 512;
 
-/// A uniform grid of ids over a plane (a loop's best-fit plane): an id is stored in every cell
-/// that the projection of its box touches (positions beyond the grid fall in its border
-/// cells), in per-cell linked lists over one array (no allocation per cell; a copy is
-/// two array copies). A query reports each id whose cells meet the query's cells
-/// exactly once (in the first cell of the overlap). It is a broad phase only: callers
-/// test the ids' own boxes, so what they find does not depend on the grid.
+/// A uniform grid of ids in space: an id is stored in every cell its box touches, in
+/// per-cell linked lists over one array (no allocation per cell; a copy is two array
+/// copies and one table copy, which the wavefront's snapshots need). Cells are hashed,
+/// so the grid holds only the cells in use; it spans [`REACH`] cells each way from its
+/// origin, and positions beyond fall in its border cells. A query reports each id
+/// whose cells meet the query's cells exactly once (in the first cell of the overlap).
+/// It is a broad phase only: callers test the ids' own boxes, so what they find does
+/// not depend on the grid.
 #[derive(Clone)]
-pub struct PlaneGrid {
-    centre: DVec3,
-    u: DVec3,
-    w: DVec3,
-    /// Plane coordinate of the grid's corner, inverse cell size, cells per side.
-    origin: f64,
+pub struct Grid {
+    origin: DVec3,
     inv: f64,
-    n: usize,
-    /// First entry of each cell's list (`NONE`: empty).
-    head: Vec<u32>,
+    /// First entry of each cell's list.
+    head: FxMap<Cell, u32>,
     /// Entries: id and next entry of the same cell.
-    entries: Vec<(u32, u32)>,
-    /// Cell range `[i0, j0, i1, j1]` of each id (indexed by id).
-    ranges: Vec<[u32; 4]>,
+    entries: Vec<(u32, Option<u32>)>,
+    /// Cell range `[lo, hi]` of each stored id (indexed by id; `None`: not stored).
+    ranges: Vec<Option<[[i32; 3]; 2]>>,
 }
 
-/// End of a cell's list.
-const NONE: u32 = u32::MAX;
-/// Largest number of cells per side of a [`PlaneGrid`] (the cells grow past it).
-const MAX_SIDE: usize = 256;
+/// Cells per side each way from a grid's origin (the cell coordinates fit 21 bits).
+pub const REACH: i32 = 1 << 20;
 
-impl PlaneGrid {
-    /// A grid with cells of about `cell` over the square of half-width `extent` around
-    /// `centre` in the plane spanned by `u` and `w` (unit, orthogonal).
-    pub fn new(cell: f64, centre: DVec3, u: DVec3, w: DVec3, extent: f64) -> PlaneGrid {
-        let extent = if extent.is_finite() && extent > 0.0 {
-            extent
-        } else {
-            1.0
-        };
+/// A cell's key: its three coordinates (offset by [`REACH`], 21 bits each) in one
+/// word, hashed as one mixed word (FxHash alone would leave the table's low bits to
+/// the first coordinate).
+#[derive(Clone, Copy, PartialEq, Eq)]
+struct Cell(u64);
+
+impl Cell {
+    #[inline]
+    fn of([x, y, z]: [i32; 3]) -> Cell {
+        let c = |v: i32| (v + REACH) as u64;
+        Cell(c(x) | c(y) << 21 | c(z) << 42)
+    }
+}
+
+impl std::hash::Hash for Cell {
+    #[inline]
+    fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
+        let h = self.0.wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        state.write_u64(h ^ (h >> 29));
+    }
+}
+
+impl Grid {
+    /// A grid with cubic cells of edge `cell` around `origin` (a non-finite or
+    /// non-positive `cell` gives one cell per unit).
+    pub fn new(cell: f64, origin: DVec3) -> Grid {
         let cell = if cell.is_finite() && cell > 0.0 {
             cell
         } else {
-            extent
+            1.0
         };
-        let n = ((2.0 * extent / cell).ceil() as usize).clamp(1, MAX_SIDE);
-        PlaneGrid {
-            centre,
-            u,
-            w,
-            origin: -extent,
-            inv: n as f64 / (2.0 * extent),
-            n,
-            head: vec![NONE; n * n],
+        Grid {
+            origin: if origin.is_finite() {
+                origin
+            } else {
+                DVec3::ZERO
+            },
+            inv: 1.0 / cell,
+            head: FxMap::default(),
             entries: Vec::new(),
             ranges: Vec::new(),
         }
     }
-    /// Cell range of the projection of the box `[lo, hi]`.
-    pub fn range(&self, lo: DVec3, hi: DVec3) -> [u32; 4] {
-        let c = (lo + hi) * 0.5 - self.centre;
-        let h = (hi - lo) * 0.5;
-        let span = |a: DVec3| h.x * a.x.abs() + h.y * a.y.abs() + h.z * a.z.abs();
-        let (cu, ru) = (c.dot(self.u), span(self.u));
-        let (cw, rw) = (c.dot(self.w), span(self.w));
-        let max = (self.n - 1) as f64;
-        let cell = |x: f64| ((x - self.origin) * self.inv).floor().clamp(0.0, max) as u32;
-        [cell(cu - ru), cell(cw - rw), cell(cu + ru), cell(cw + rw)]
+
+    /// The cell of `p`, clamped to the grid's reach (NaN: the origin's).
+    #[inline]
+    fn cell(&self, p: DVec3) -> [i32; 3] {
+        let q = (p - self.origin) * self.inv;
+        // floor without a call to libm's floor: `as` truncates (and saturates)
+        let floor = |v: f64| {
+            let t = v as i32;
+            t.saturating_sub(i32::from((t as f64) > v))
+                .clamp(-REACH, REACH - 1)
+        };
+        [floor(q.x), floor(q.y), floor(q.z)]
     }
-    /// Inserts `id` into every cell the box touches; false when it spans more than
-    /// `MAX_CELLS` (the caller keeps such ids apart).
+
+    /// Cell range of the box `[lo, hi]` and its number of cells.
+    #[inline]
+    fn range(&self, lo: DVec3, hi: DVec3) -> ([[i32; 3]; 2], i64) {
+        let (a, b) = (self.cell(lo), self.cell(hi));
+        let side = |k: usize| (b[k] as i64 - a[k] as i64 + 1).max(0);
+        ([a, b], side(0) * side(1) * side(2))
+    }
+
+    /// Inserts `id` into every cell the box `[lo, hi]` touches; false (not stored)
+    /// when it spans more than [`MAX_CELLS`] cells or none.
     pub fn insert_box(&mut self, lo: DVec3, hi: DVec3, id: u32) -> bool {
-        let r = self.range(lo, hi);
-        let cells = (r[2] - r[0] + 1) as i64 * (r[3] - r[1] + 1) as i64;
-        if cells > MAX_CELLS {
+        let (r, cells) = self.range(lo, hi);
+        if !(1..=MAX_CELLS).contains(&cells) {
             return false;
         }
         let i = id as usize;
         if self.ranges.len() <= i {
-            self.ranges.resize(i + 1, [1, 1, 0, 0]);
+            self.ranges.resize(i + 1, None);
         }
-        self.ranges[i] = r;
-        for y in r[1]..=r[3] {
-            for x in r[0]..=r[2] {
-                let c = y as usize * self.n + x as usize;
-                self.entries.push((id, self.head[c]));
-                self.head[c] = (self.entries.len() - 1) as u32;
+        self.ranges[i] = Some(r);
+        let [a, b] = r;
+        for x in a[0]..=b[0] {
+            for y in a[1]..=b[1] {
+                for z in a[2]..=b[2] {
+                    let e = self.entries.len() as u32;
+                    let next = self.head.insert(Cell::of([x, y, z]), e);
+                    self.entries.push((id, next));
+                }
             }
         }
         true
     }
-    /// Every id in a cell the box touches, each once (in no particular order).
+
+    /// Inserts `id` at the point `p` (one cell: always stored).
+    pub fn insert_point(&mut self, p: DVec3, id: u32) {
+        let stored = self.insert_box(p, p, id);
+        debug_assert!(stored, "a point spans one cell");
+    }
+
+    /// Every stored id in a cell the box `[lo, hi]` touches, each once (in no
+    /// particular order), into `out` (cleared first).
     pub fn query_box(&self, lo: DVec3, hi: DVec3, out: &mut Vec<u32>) {
         out.clear();
-        let q = self.range(lo, hi);
-        for y in q[1]..=q[3] {
-            for x in q[0]..=q[2] {
-                let mut e = self.head[y as usize * self.n + x as usize];
-                while e != NONE {
-                    let (id, next) = self.entries[e as usize];
-                    let r = self.ranges[id as usize];
-                    // this is the first cell of the id's overlap with the query
-                    if x == r[0].max(q[0]) && y == r[1].max(q[1]) {
-                        out.push(id);
+        let ([qa, qb], cells) = self.range(lo, hi);
+        let meets = |[a, b]: [[i32; 3]; 2]| (0..3).all(|k| a[k] <= qb[k] && qa[k] <= b[k]);
+        if cells == 0 || cells > MAX_CELLS * 8 {
+            // a huge query box: every stored id's own range instead
+            for (id, r) in self.ranges.iter().enumerate() {
+                if r.is_some_and(meets) {
+                    out.push(id as u32);
+                }
+            }
+            return;
+        }
+        for x in qa[0]..=qb[0] {
+            for y in qa[1]..=qb[1] {
+                for z in qa[2]..=qb[2] {
+                    let mut e = self.head.get(&Cell::of([x, y, z])).copied();
+                    while let Some(i) = e {
+                        let (id, next) = self.entries[i as usize];
+                        // reported in the first cell of the id's overlap with the query
+                        if let Some([a, _]) = self.ranges[id as usize] {
+                            if x == a[0].max(qa[0]) && y == a[1].max(qa[1]) && z == a[2].max(qa[2])
+                            {
+                                out.push(id);
+                            }
+                        }
+                        e = next;
                     }
-                    e = next;
                 }
             }
         }
@@ -123,16 +171,13 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
 
     /// A grid query reports each id at most once, every id whose box meets the query
-    /// box among them (also boxes beyond the grid's extent, in its border cells), and
-    /// exactly the ids whose cell ranges meet the query's.
+    /// box among them, and exactly the ids whose cell ranges meet the query's (through
+    /// the cells, and through the ranges for a huge query).
     #[test]
     fn grid_query_reports_every_overlap_once() {
         use rand::Rng;
         let mut rng = ChaCha8Rng::seed_from_u64(11);
-        let n = DVec3::new(0.3, -0.2, 1.0).normalize();
-        let u = n.any_orthonormal_vector();
-        let w = n.cross(u);
-        let mut g = PlaneGrid::new(0.1, DVec3::new(0.1, 0.2, 0.3), u, w, 3.0);
+        let mut g = Grid::new(0.25, DVec3::new(0.1, 0.2, 0.3));
         let mut boxes = Vec::new();
         let rand_box = |rng: &mut ChaCha8Rng, size: f64| {
             let c = DVec3::new(
@@ -150,19 +195,21 @@ mod tests {
         for id in 0..400u32 {
             let (lo, hi) = rand_box(&mut rng, if id % 50 == 0 { 6.0 } else { 0.6 });
             if g.insert_box(lo, hi, id) {
-                boxes.push((id, lo, hi, g.range(lo, hi)));
+                boxes.push((id, lo, hi, g.range(lo, hi).0));
             }
         }
         assert!(boxes.len() < 400, "some boxes span too many cells");
         let mut out = Vec::new();
         let mut found = 0;
+        let mut huge = 0;
         for q in 0..300 {
             let (lo, hi) = rand_box(&mut rng, if q % 20 == 0 { 8.0 } else { 1.0 });
             g.query_box(lo, hi, &mut out);
-            let r = g.range(lo, hi);
+            let ([qa, qb], cells) = g.range(lo, hi);
+            huge += usize::from(cells > MAX_CELLS * 8);
             let mut want: Vec<u32> = boxes
                 .iter()
-                .filter(|(_, _, _, c)| c[0] <= r[2] && r[0] <= c[2] && c[1] <= r[3] && r[1] <= c[3])
+                .filter(|(_, _, _, [a, b])| (0..3).all(|k| a[k] <= qb[k] && qa[k] <= b[k]))
                 .map(|b| b.0)
                 .collect();
             let mut got = out.clone();
@@ -178,5 +225,6 @@ mod tests {
             }
         }
         assert!(found > 100, "{found}");
+        assert!(huge > 5 && huge < 300, "{huge} huge queries");
     }
 }

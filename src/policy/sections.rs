@@ -440,6 +440,16 @@ pub struct Limits {
     pub max_patch_triangles: usize,
 }
 
+impl Limits {
+    /// The threads that fill holes: [`Limits::threads`], 0 meaning one per core.
+    pub fn fill_threads(&self) -> usize {
+        match self.threads {
+            0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
+            n => n,
+        }
+    }
+}
+
 impl Default for Limits {
     fn default() -> Self {
         Limits {

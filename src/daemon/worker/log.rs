@@ -6,9 +6,8 @@ use crate::daemon::claim::{Job, Phase};
 use crate::daemon::fsops::{self, FileId};
 use crate::daemon::sets;
 use serde_json::{json, Value};
-use std::fs;
 use std::io;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::SystemTime;
 
 /// The `"daemon"` object of a log.
@@ -59,26 +58,7 @@ pub(super) fn final_log(
 
 /// Writes `bytes` as `path` (temporary name, fsync, rename) and returns its identity.
 pub(super) fn write_file(path: &Path, bytes: &[u8]) -> io::Result<FileId> {
-    use std::io::Write;
-    use std::os::unix::fs::OpenOptionsExt;
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".tmp");
-    let tmp = PathBuf::from(tmp);
-    let _ = fs::remove_file(&tmp);
-    let mut f = fs::OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .mode(0o644)
-        .custom_flags(libc::O_NOFOLLOW)
-        .open(&tmp)?;
-    let r = f
-        .write_all(bytes)
-        .and_then(|()| f.sync_all())
-        .and_then(|()| fs::rename(&tmp, path));
-    if r.is_err() {
-        let _ = fs::remove_file(&tmp);
-    }
-    r?;
+    let f = fsops::write_durably(path, bytes, 0o644)?;
     Ok(FileId::of(&f.metadata()?))
 }
 

@@ -68,6 +68,8 @@ pub(super) struct Builder<'a> {
     pub(super) mesh_tris: Vec<[DVec3; 3]>,
     pub(super) obstacles: Obstacles,
     pub(super) cell: f64,
+    /// The grids' origin: the loop's centroid.
+    pub(super) origin: DVec3,
     pub(super) steps: usize,
     pub(super) applied: usize,
     pub(super) set_aside: usize,
@@ -156,9 +158,10 @@ impl<'a> Builder<'a> {
             );
         }
         let cell = lmean;
-        let mut node_grid = Grid::new(cell);
+        let origin = measure::centroid(&pos);
+        let mut node_grid = Grid::new(cell, origin);
         for (i, q) in pos.iter().enumerate() {
-            node_grid.insert(i as u32, *q, *q);
+            node_grid.insert_point(*q, i as u32);
         }
         // mesh triangles near the hole: its box grown by half its diagonal and a few edges
         let (lo, hi) = pos.iter().fold(
@@ -167,7 +170,7 @@ impl<'a> Builder<'a> {
         );
         let margin = 0.5 * (hi - lo).length() + 4.0 * lmean;
         let (lo, hi) = (lo - DVec3::splat(margin), hi + DVec3::splat(margin));
-        let mut obstacles = Obstacles::new(2.0 * cell);
+        let mut obstacles = Obstacles::new(2.0 * cell, origin);
         let mut mesh_tris = Vec::new();
         // A triangle's box misses [lo, hi] when on some axis all three corners lie
         // beyond the same side: the per-vertex outcodes (one bit per side and axis)
@@ -227,6 +230,7 @@ impl<'a> Builder<'a> {
             mesh_tris,
             obstacles,
             cell,
+            origin,
             steps: 0,
             applied: 0,
             set_aside: 0,
@@ -272,7 +276,7 @@ impl<'a> Builder<'a> {
         self.ring
             .push(v, id, id, front, NodeData { blocked, behind });
         let q = self.pos[v as usize];
-        self.node_grid.insert(id, q, q);
+        self.node_grid.insert_point(q, id);
         id
     }
 
@@ -544,7 +548,7 @@ impl<'a> Builder<'a> {
         if crate::check::check_degenerate(pos, &patch, &self.ctx.policy.checks).is_err() {
             return false;
         }
-        let mut ob = Obstacles::new(2.0 * self.cell);
+        let mut ob = Obstacles::new(2.0 * self.cell, self.origin);
         for t in &self.mesh_tris {
             ob.add(*t);
         }

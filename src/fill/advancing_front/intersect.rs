@@ -1,6 +1,6 @@
 //! The front's overlap test (the exact triangle-triangle test of
-//! [`crate::geometry::predicates`] on shrunk triangles) and a spatial hash grid of
-//! triangles, used to keep the front from creating a triangle that overlaps the patch
+//! [`crate::geometry::predicates`] on shrunk triangles) and a set of triangles with a
+//! [`Grid`] over them, used to keep the front from creating a triangle that overlaps the patch
 //! built so far or the mesh around the hole.
 //!
 //! Triangles that share a vertex or an edge touch by construction. Rather than
@@ -10,8 +10,8 @@
 //! a crossing) survives the shrink unless it is thinner than `SHRINK` times the
 //! triangle size.
 
-use crate::fasthash::FxMap;
 use crate::geometry::bvh::tri_box;
+use crate::geometry::grid::Grid;
 use crate::geometry::predicates::tri_tri_nondegenerate;
 use glam::DVec3;
 
@@ -30,97 +30,22 @@ pub fn overlap(a: &[DVec3; 3], b: &[DVec3; 3]) -> bool {
     tri_tri_nondegenerate(&shrink(a), &shrink(b))
 }
 
-/// A uniform hash grid of axis-aligned boxes (ids), for broad-phase queries.
-pub struct Grid {
-    inv: f64,
-    cells: FxMap<(i64, i64, i64), Vec<u32>>,
-    /// Boxes spanning too many cells: tested on every query.
-    big: Vec<u32>,
-}
-
-/// A box spanning more cells than this goes to the `big` list.
-const MAX_CELLS: i64 = 512;
-
-impl Grid {
-    /// A grid with cells of edge `cell` (> 0).
-    pub fn new(cell: f64) -> Grid {
-        Grid {
-            inv: 1.0 / cell,
-            cells: FxMap::default(),
-            big: Vec::new(),
-        }
-    }
-
-    #[inline]
-    fn key(&self, p: DVec3) -> (i64, i64, i64) {
-        // `as` saturates, so far-away or huge coordinates stay well defined
-        (
-            (p.x * self.inv).floor() as i64,
-            (p.y * self.inv).floor() as i64,
-            (p.z * self.inv).floor() as i64,
-        )
-    }
-
-    /// Adds box `[lo, hi]` with id `id`.
-    pub fn insert(&mut self, id: u32, lo: DVec3, hi: DVec3) {
-        let a = self.key(lo);
-        let b = self.key(hi);
-        let n = (b.0.saturating_sub(a.0).saturating_add(1))
-            .saturating_mul(b.1.saturating_sub(a.1).saturating_add(1))
-            .saturating_mul(b.2.saturating_sub(a.2).saturating_add(1));
-        if !(1..=MAX_CELLS).contains(&n) {
-            self.big.push(id);
-            return;
-        }
-        for x in a.0..=b.0 {
-            for y in a.1..=b.1 {
-                for z in a.2..=b.2 {
-                    self.cells.entry((x, y, z)).or_default().push(id);
-                }
-            }
-        }
-    }
-
-    /// Appends to `out` the ids of boxes that may meet `[lo, hi]` (with repeats).
-    pub fn query(&self, lo: DVec3, hi: DVec3, out: &mut Vec<u32>) {
-        out.extend_from_slice(&self.big);
-        let a = self.key(lo);
-        let b = self.key(hi);
-        let n = (b.0.saturating_sub(a.0).saturating_add(1))
-            .saturating_mul(b.1.saturating_sub(a.1).saturating_add(1))
-            .saturating_mul(b.2.saturating_sub(a.2).saturating_add(1));
-        if !(1..=MAX_CELLS * 8).contains(&n) {
-            // a huge query box: scan every cell instead
-            for v in self.cells.values() {
-                out.extend_from_slice(v);
-            }
-            return;
-        }
-        for x in a.0..=b.0 {
-            for y in a.1..=b.1 {
-                for z in a.2..=b.2 {
-                    if let Some(v) = self.cells.get(&(x, y, z)) {
-                        out.extend_from_slice(v);
-                    }
-                }
-            }
-        }
-    }
-}
-
 /// Triangles that new triangles must not overlap, with a grid over them.
 pub struct Obstacles {
     tris: Vec<[DVec3; 3]>,
     grid: Grid,
+    /// Triangles whose box spans too many cells: tested on every query.
+    big: Vec<u32>,
     scratch: Vec<u32>,
 }
 
 impl Obstacles {
-    /// An empty set with grid cells of edge `cell`.
-    pub fn new(cell: f64) -> Obstacles {
+    /// An empty set with grid cells of edge `cell` around `origin`.
+    pub fn new(cell: f64, origin: DVec3) -> Obstacles {
         Obstacles {
             tris: Vec::new(),
-            grid: Grid::new(cell),
+            grid: Grid::new(cell, origin),
+            big: Vec::new(),
             scratch: Vec::new(),
         }
     }
@@ -129,7 +54,9 @@ impl Obstacles {
     pub fn add(&mut self, t: [DVec3; 3]) -> u32 {
         let id = self.tris.len() as u32;
         let (lo, hi) = tri_box(&t);
-        self.grid.insert(id, lo, hi);
+        if !self.grid.insert_box(lo, hi, id) {
+            self.big.push(id);
+        }
         self.tris.push(t);
         id
     }
@@ -139,17 +66,15 @@ impl Obstacles {
         self.tris.len()
     }
 
-    /// The id of a triangle overlapping `t` (see [`overlap`]), skipping ids for
-    /// which `skip` is true.
+    /// The id of a triangle overlapping `t` (see [`overlap`]; the first one found),
+    /// skipping ids for which `skip` is true.
     pub fn find_overlap(&mut self, t: &[DVec3; 3], skip: impl Fn(u32) -> bool) -> Option<u32> {
         let (lo, hi) = tri_box(t);
         let pad = (hi - lo).max_element() * 1e-9;
         let mut ids = std::mem::take(&mut self.scratch);
-        ids.clear();
         self.grid
-            .query(lo - DVec3::splat(pad), hi + DVec3::splat(pad), &mut ids);
-        ids.sort_unstable();
-        ids.dedup();
+            .query_box(lo - DVec3::splat(pad), hi + DVec3::splat(pad), &mut ids);
+        ids.extend_from_slice(&self.big);
         let st = shrink(t);
         let mut found = None;
         for &id in &ids {
@@ -201,7 +126,7 @@ mod tests {
 
     #[test]
     fn grid_finds_overlaps() {
-        let mut o = Obstacles::new(0.5);
+        let mut o = Obstacles::new(0.5, DVec3::ZERO);
         o.add(t([0., 0., 0.], [1., 0., 0.], [0., 1., 0.]));
         o.add(t([5., 5., 0.], [6., 5., 0.], [5., 6., 0.]));
         let q = t([0.2, 0.2, -1.], [0.2, 0.2, 1.], [0.9, 0.9, 0.]);

@@ -103,12 +103,13 @@ use super::kit::front::{edge_key, Entry, FrontQueue, Ring};
 use super::kit::{fair, FillContext, FillError, TooLarge};
 use crate::fasthash::FxSet;
 use crate::fasthash::HashMap;
+use crate::geometry::grid::Grid;
 use crate::geometry::measure;
 use crate::mesh::VertexId;
 use crate::patch::Patch;
 use builder::Builder;
 use glam::DVec3;
-use intersect::{Grid, Obstacles};
+use intersect::Obstacles;
 use std::f64::consts::PI;
 
 /// Smallest angle (degrees) a step may create (at least the checks' minimum).

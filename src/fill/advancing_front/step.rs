@@ -110,9 +110,8 @@ impl Builder<'_> {
         let nd = &self.ring.nodes[x as usize];
         let (f, p, n) = (nd.front, nd.prev, nd.next);
         let mut ids = std::mem::take(&mut self.node_scratch);
-        ids.clear();
         self.node_grid
-            .query(q - DVec3::splat(r), q + DVec3::splat(r), &mut ids);
+            .query_box(q - DVec3::splat(r), q + DVec3::splat(r), &mut ids);
         let mut best: Option<(f64, u32)> = None;
         for &c in &ids {
             let cn = &self.ring.nodes[c as usize];

@@ -136,7 +136,7 @@ fn validate(mesh: &Mesh, hole: &Hole, patch: &Patch) -> Stats {
         .iter()
         .map(|t| t.map(|i| pos[i as usize]))
         .collect();
-    let mut ob = intersect::Obstacles::new(hole.mean_edge_length * 2.0);
+    let mut ob = intersect::Obstacles::new(hole.mean_edge_length * 2.0, measure::centroid(&pos));
     for g in &geo {
         ob.add(*g);
     }

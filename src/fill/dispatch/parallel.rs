@@ -22,10 +22,7 @@ use std::time::Instant;
 /// (the OBJ reader's) as they come. Optional: without it the pool starts on
 /// first use. Does nothing but spin when the pool is already running.
 pub fn start_workers(policy: &Policy) {
-    let threads = match policy.limits.threads {
-        0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
-        n => n,
-    };
+    let threads = policy.limits.fill_threads();
     if threads > 1 {
         let _ = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
@@ -79,11 +76,7 @@ pub fn propose_all(
     let mut order: Vec<usize> = (0..holes.len()).filter(|&i| skip[i].is_none()).collect();
     order.sort_by_key(|&i| std::cmp::Reverse(holes[i].len()));
     let run = |i: usize| propose(mesh, &holes[i], policy, checker, 0);
-    let threads = match policy.limits.threads {
-        0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
-        n => n,
-    }
-    .min(order.len() + 1);
+    let threads = policy.limits.fill_threads().min(order.len() + 1);
     let next = AtomicUsize::new(0);
     let slots: Vec<Mutex<Option<Proposal>>> = order.iter().map(|_| Mutex::new(None)).collect();
     // job 0 computes the checker's face boxes, so that they are ready (or being

@@ -89,7 +89,7 @@
 //!     front whose residual is closed as above, `alpha = 90`).
 //!
 //! Cost: a binary heap of front angles with lazy invalidation (only the vertices a step
-//! touches are re-measured) and spatial hashes of the front vertices and the triangles, so
+//! touches are re-measured) and grids of the front vertices and the triangles, so
 //! one step costs `O(log n)` plus a local neighbourhood.
 
 // `!(x > bound)` is used on purpose: it also rejects NaN.
@@ -104,7 +104,7 @@ mod tests;
 use super::kit::front::{edge_key, Entry, FrontQueue, Ring};
 use super::kit::{check_patch_size, residual, retry, Cause, FillContext, FillError, TooLarge};
 use crate::fasthash::{HashMap, HashSet};
-use crate::geometry::grid::PlaneGrid;
+use crate::geometry::grid::Grid;
 use crate::geometry::measure;
 use crate::geometry::predicates::{ccw2d, overlap2d, overlap2d_ccw, p2, seg_crosses_tri, P2};
 use crate::patch::Patch;

@@ -61,9 +61,9 @@ pub(super) struct Wave {
     /// Front nodes by θ plus a penalty of 2π per failed attempt (`data`: θ).
     pub(super) heap: FrontQueue<f64>,
     pub(super) placed: Vec<Placed>,
-    pub(super) tri_grid: PlaneGrid,
+    pub(super) tri_grid: Grid,
     pub(super) big: Vec<u32>,
-    pub(super) node_grid: PlaneGrid,
+    pub(super) node_grid: Grid,
     pub(super) rng: ChaCha8Rng,
     pub(super) fallback_normal: DVec3,
     /// New points must lie within `reach` of `centre` (the loop's centroid).
@@ -314,9 +314,9 @@ impl Wave {
             ring: Ring::new(k),
             heap: FrontQueue::new(),
             placed: Vec::new(),
-            tri_grid: PlaneGrid::new(CELL * len, centre, pu, pw, reach + 2.0 * len),
+            tri_grid: Grid::new(CELL * len, centre),
             big: Vec::new(),
-            node_grid: PlaneGrid::new(CELL * len, centre, pu, pw, reach + 2.0 * len),
+            node_grid: Grid::new(CELL * len, centre),
             rng: ChaCha8Rng::seed_from_u64(
                 ctx.policy.seed ^ (ctx.hole.id as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
             ),
@@ -392,7 +392,7 @@ impl Wave {
             .ring
             .push(vert, prev, next, front, NodeData { fails: 0 });
         let p = self.pos[vert as usize];
-        self.node_grid.insert_box(p, p, id);
+        self.node_grid.insert_point(p, id);
         id
     }
 
