@@ -33,9 +33,8 @@ pub struct Grid {
 pub const REACH: i32 = 1 << 20;
 
 /// A cell's key: its three coordinates (offset by [`REACH`], 21 bits each) in one
-/// word, hashed as one mixed word (FxHash alone would leave the table's low bits to
-/// the first coordinate).
-#[derive(Clone, Copy, PartialEq, Eq)]
+/// word, hashed as one.
+#[derive(Clone, Copy, PartialEq, Eq, Hash)]
 struct Cell(u64);
 
 impl Cell {
@@ -43,14 +42,6 @@ impl Cell {
     fn of([x, y, z]: [i32; 3]) -> Cell {
         let c = |v: i32| (v + REACH) as u64;
         Cell(c(x) | c(y) << 21 | c(z) << 42)
-    }
-}
-
-impl std::hash::Hash for Cell {
-    #[inline]
-    fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
-        let h = self.0.wrapping_mul(0x9E37_79B9_7F4A_7C15);
-        state.write_u64(h ^ (h >> 29));
     }
 }
 

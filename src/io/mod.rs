@@ -539,38 +539,3 @@ pub(crate) fn unit_color(v: f64) -> f32 {
 pub(crate) fn color_byte(c: f32) -> u8 {
     (c.clamp(0.0, 1.0) * 255.0).round() as u8
 }
-
-/// Fast hashing of bit patterns (STL welding); keys come from one file, so no
-/// protection against adversarial collisions is needed beyond the fallback of a
-/// hash map (a slow but correct weld).
-#[derive(Default, Clone, Copy)]
-pub(crate) struct FastHasher(u64);
-
-impl std::hash::Hasher for FastHasher {
-    fn finish(&self) -> u64 {
-        // Final avalanche (murmur3 fmix64) so that the low bits are well mixed.
-        let mut h = self.0;
-        h ^= h >> 33;
-        h = h.wrapping_mul(0xff51_afd7_ed55_8ccd);
-        h ^= h >> 33;
-        h = h.wrapping_mul(0xc4ce_b9fe_1a85_ec53);
-        h ^ (h >> 33)
-    }
-    fn write(&mut self, bytes: &[u8]) {
-        // `[u64; 3]` keys arrive here as 24 bytes (integer slices hash as bytes).
-        let mut chunks = bytes.chunks_exact(8);
-        for c in &mut chunks {
-            let mut w = [0u8; 8];
-            w.copy_from_slice(c);
-            self.write_u64(u64::from_le_bytes(w));
-        }
-        for &b in chunks.remainder() {
-            self.write_u64(u64::from(b));
-        }
-    }
-    fn write_u64(&mut self, i: u64) {
-        self.0 = (self.0.rotate_left(5) ^ i).wrapping_mul(0x517c_c1b7_2722_0a95);
-    }
-}
-
-pub(crate) type FastBuild = std::hash::BuildHasherDefault<FastHasher>;

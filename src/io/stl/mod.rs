@@ -26,8 +26,9 @@ use super::attrs::StlExtras;
 use super::text::{
     has_nul, parse_coord, show, strip_comment, tokens, Lines, Next, MAX_LINE, UTF8_BOM,
 };
-use super::{io_error, malformed, read_error, Encoding, FastBuild, IoError, Precision, RawMesh};
+use super::{io_error, malformed, read_error, Encoding, IoError, Precision, RawMesh};
 use super::{Caps, MAX_ELEMENTS};
+use crate::fasthash::FxBuild;
 use glam::DVec3;
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -37,7 +38,7 @@ use std::path::Path;
 /// Welds corners into vertices by exact position. The key is the coordinates' bit
 /// pattern, `[u64; 3]` of `f64` (ASCII STL; binary STL uses [`Welder32`]).
 struct Welder<K = [u64; 3]> {
-    map: HashMap<K, u32, FastBuild>,
+    map: HashMap<K, u32, FxBuild>,
     corners: u64,
     max: u64,
 }
@@ -220,7 +221,7 @@ fn note_weld(corners: u64, raw: &mut RawMesh) {
 impl<K: std::hash::Hash + Eq> Welder<K> {
     fn new(capacity: usize, max: u64) -> Self {
         Welder {
-            map: HashMap::with_capacity_and_hasher(capacity, FastBuild::default()),
+            map: HashMap::with_capacity_and_hasher(capacity, FxBuild::default()),
             corners: 0,
             max: max.min(MAX_ELEMENTS),
         }
