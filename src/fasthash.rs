@@ -1,6 +1,6 @@
 //! Hash maps and sets for the geometry code, whose keys are small integers (edge pairs,
-//! vertex ids, grid cells), where std's SipHash was a tenth of the instructions of a
-//! fill (callgrind on the bench meshes).
+//! vertex ids, grid cells), where std's SipHash would cost far more than the work the
+//! maps serve.
 //!
 //! [`HashMap`] and [`HashSet`] use foldhash's fast hasher, with a seed random per
 //! process (no fixed seed an input could be crafted against); no result depends on

@@ -316,7 +316,7 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
         path: args.output.display().to_string(),
         format: out_format,
     });
-    // what the output format cannot hold (issue 18)
+    // what the output format cannot hold
     report.attributes.dropped = holefill::io::attrs::dropped(&out, out_format);
 
     if !args.quiet {

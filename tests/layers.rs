@@ -43,7 +43,7 @@ const LAYERS: &[&[&str]] = &[
     ],
     &["fill::dispatch", "fill"],
     &["pipeline"],
-    // pictures of repairs (issue 22)
+    // pictures of repairs
     &["picture"],
 ];
 

@@ -1,4 +1,4 @@
-//! Islands inside holes (issue 17, item 4) and floating debris (item 7).
+//! Islands inside holes and floating debris.
 //!
 //! How the issue's words are read:
 //! - an island of a hole is the border loop of another connected piece (a loop the

@@ -1,4 +1,4 @@
-//! Cracks, not holes (issue 17, item 2): boundary vertices that coincide with another
+//! Cracks, not holes: boundary vertices that coincide with another
 //! boundary vertex (of another loop or of the same loop: a slit) are identified, so
 //! that the crack is zipped shut instead of filled. This also closes the loops of zero
 //! area the builder leaves where it split a pinched or non-manifold vertex into copies

@@ -88,7 +88,7 @@ impl Default for Clean {
     }
 }
 
-/// Rim trimming, the last step of the fallback chain (issue 17): when every method of
+/// Rim trimming, the last step of the fallback chain: when every method of
 /// a hole's list failed, the input faces around the loop are removed ring by ring and
 /// the larger hole filled. Changes input faces (each counted in the log).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -112,7 +112,7 @@ impl Default for Rim {
     }
 }
 
-/// Cracks (issue 17): boundary vertices that coincide with another boundary vertex
+/// Cracks: boundary vertices that coincide with another boundary vertex
 /// are identified, zipping the crack shut instead of filling it (the loop is logged
 /// `stitched`). Changes the corners of the input faces at the crack (counted in the log).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -145,7 +145,7 @@ pub enum IslandMode {
     Remove,
 }
 
-/// Islands (issue 17): the border of another piece of surface lying inside a hole.
+/// Islands: the border of another piece of surface lying inside a hole.
 /// Never a patch over an island: small ones are removed as debris, larger ones bridged
 /// to the hole's loop (or, when that cannot be done, the hole is skipped).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -165,7 +165,7 @@ impl Default for Islands {
     }
 }
 
-/// Floating debris (issue 17): connected pieces of fewer faces than this are removed
+/// Floating debris: connected pieces of fewer faces than this are removed
 /// before filling (0: kept).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq, Default)]
 #[serde(default, deny_unknown_fields)]

@@ -1,4 +1,4 @@
-//! Rim trimming, the last step of the fallback chain (issue 17; not from a paper).
+//! Rim trimming, the last step of the fallback chain (not from a paper).
 //!
 //! On real scans a hole is often bordered by faces no patch can meet cleanly: folded
 //! or stretched faces at a range scan's depth jump, slivers of photogrammetry, a
