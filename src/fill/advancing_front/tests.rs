@@ -657,18 +657,6 @@ fn step_cap_gives_a_clean_error() {
     }
 }
 
-#[test]
-fn expired_deadline_times_out() {
-    let (mesh, lp) = grid_with_hole(30, |c| (c - DVec3::new(15.0, 15.0, 0.0)).length() < 9.0);
-    let policy = Policy::default();
-    let hole = Hole::new(0, &mesh, lp, &policy);
-    let ctx = FillContext {
-        deadline: Deadline(Some(std::time::Instant::now())),
-        ..FillContext::new(&mesh, &hole, &policy)
-    };
-    assert_eq!(fill(&ctx), Err(FillError::Timeout));
-}
-
 /// A front option out of range never reaches the front: the policy rejects it.
 #[test]
 fn bad_front_options_are_rejected_by_the_policy() {

@@ -6,7 +6,7 @@ use super::*;
 use crate::policy::Checks;
 use crate::testutil::{
     cut_faces, cylinder_with_hole, fan, joined, mesh_and_loop, sheet, sheet_hole_at,
-    sphere_cap_removed, unit_grid, SHEET_HOLE,
+    sphere_cap_removed, sphere_with_hole, unit_grid, SHEET_HOLE,
 };
 use glam::DVec3;
 
@@ -180,4 +180,28 @@ fn dispatcher_fills_with_wavefront() {
     assert!(mesh.num_vertices() > raw.positions.len());
     mesh.validate().unwrap();
     assert!(mesh.topo.boundary_loops().is_empty());
+}
+
+/// A passed deadline ends every method of the table with a timeout, on a hole each
+/// would otherwise fill (the fan, which makes its few triangles at once, aside).
+#[test]
+fn every_method_times_out_on_a_passed_deadline() {
+    let (mesh, lp) = sphere_with_hole(3, 0.75);
+    let policy = Policy::default();
+    let hole = Hole::new(0, &mesh, lp, &policy);
+    let mut timed = 0;
+    for &method in Method::ALL {
+        let live = FillContext::new(&mesh, &hole, &policy);
+        assert!(run_method(method, &live).is_ok(), "{} fills it", method.name());
+        if method == Method::Fan {
+            continue;
+        }
+        let ctx = FillContext {
+            deadline: Deadline(Some(std::time::Instant::now())),
+            ..FillContext::new(&mesh, &hole, &policy)
+        };
+        assert_eq!(run_method(method, &ctx), Err(FillError::Timeout), "{}", method.name());
+        timed += 1;
+    }
+    assert_eq!(timed, Method::ALL.len() - 1);
 }

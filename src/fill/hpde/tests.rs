@@ -3,7 +3,6 @@
 
 use super::*;
 use crate::check::{check_degenerate, check_topology, patch_positions, quality};
-use crate::fill::kit::Deadline;
 use crate::io::RawMesh;
 use crate::mesh::Mesh;
 use crate::patch::{apply_patch, Hole};
@@ -243,18 +242,6 @@ fn same_seed_same_patch_bits() {
     };
     assert_eq!(a.triangles, b.triangles);
     assert_eq!(bits(&a), bits(&b));
-}
-
-#[test]
-fn expired_deadline_times_out() {
-    let (mesh, lp) = sphere_with_hole(3, 0.75);
-    let policy = Policy::default();
-    let hole = Hole::new(0, &mesh, lp, &policy);
-    let ctx = FillContext {
-        deadline: Deadline(Some(std::time::Instant::now())),
-        ..FillContext::new(&mesh, &hole, &policy)
-    };
-    assert_eq!(fill(&ctx), Err(FillError::Timeout));
 }
 
 /// A hole across the ridge of a roof whose faces meet at 60 degrees: the segmentation

@@ -291,18 +291,6 @@ fn small_loops_close() {
     }
 }
 
-#[test]
-fn a_passed_deadline_is_a_timeout() {
-    let (mesh, lp) = sphere_case(4, 0.3);
-    let policy = Policy::default();
-    let hole = Hole::new(0, &mesh, lp, &policy);
-    let ctx = FillContext {
-        deadline: Deadline(Some(std::time::Instant::now())),
-        ..FillContext::new(&mesh, &hole, &policy)
-    };
-    assert_eq!(fill(&ctx), Err(FillError::Timeout));
-}
-
 /// LS-SVM options out of range never reach the method: the policy rejects them.
 #[test]
 fn bad_policy_values_are_rejected_by_the_policy() {
