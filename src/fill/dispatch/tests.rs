@@ -192,7 +192,11 @@ fn every_method_times_out_on_a_passed_deadline() {
     let mut timed = 0;
     for &method in Method::ALL {
         let live = FillContext::new(&mesh, &hole, &policy);
-        assert!(run_method(method, &live).is_ok(), "{} fills it", method.name());
+        assert!(
+            run_method(method, &live).is_ok(),
+            "{} fills it",
+            method.name()
+        );
         if method == Method::Fan {
             continue;
         }
@@ -200,7 +204,12 @@ fn every_method_times_out_on_a_passed_deadline() {
             deadline: Deadline(Some(std::time::Instant::now())),
             ..FillContext::new(&mesh, &hole, &policy)
         };
-        assert_eq!(run_method(method, &ctx), Err(FillError::Timeout), "{}", method.name());
+        assert_eq!(
+            run_method(method, &ctx),
+            Err(FillError::Timeout),
+            "{}",
+            method.name()
+        );
         timed += 1;
     }
     assert_eq!(timed, Method::ALL.len() - 1);
