@@ -85,7 +85,8 @@ impl Grid {
     fn range(&self, lo: DVec3, hi: DVec3) -> ([[i32; 3]; 2], i64) {
         let (a, b) = (self.cell(lo), self.cell(hi));
         let side = |k: usize| (b[k] as i64 - a[k] as i64 + 1).max(0);
-        ([a, b], side(0) * side(1) * side(2))
+        // up to 2^21 cells a side: the product of three can pass i64
+        ([a, b], side(0).saturating_mul(side(1)).saturating_mul(side(2)))
     }
 
     /// Inserts `id` into every cell the box `[lo, hi]` touches; false (not stored)
@@ -164,6 +165,23 @@ mod tests {
     /// A grid query reports each id at most once, every id whose box meets the query
     /// box among them, and exactly the ids whose cell ranges meet the query's (through
     /// the cells, and through the ranges for a huge query).
+    /// Boxes out to the grid's reach and past it (and a NaN corner) are kept apart or
+    /// land in the border cells: no overflow, and a query there finds them.
+    #[test]
+    fn far_and_huge_boxes_are_well_defined() {
+        let mut g = Grid::new(1e-3, DVec3::ZERO);
+        let huge = DVec3::splat(1e300);
+        assert!(!g.insert_box(-huge, huge, 0), "spans every cell: kept apart");
+        assert!(g.insert_box(huge, huge, 1));
+        assert!(g.insert_box(DVec3::splat(f64::NAN), DVec3::splat(f64::NAN), 2));
+        let mut out = Vec::new();
+        g.query_box(huge * 0.5, huge, &mut out);
+        assert_eq!(out, vec![1]);
+        g.query_box(-huge, huge, &mut out);
+        out.sort_unstable();
+        assert_eq!(out, vec![1, 2]);
+    }
+
     #[test]
     fn grid_query_reports_every_overlap_once() {
         use rand::Rng;
