@@ -86,7 +86,10 @@ impl Grid {
         let (a, b) = (self.cell(lo), self.cell(hi));
         let side = |k: usize| (b[k] as i64 - a[k] as i64 + 1).max(0);
         // up to 2^21 cells a side: the product of three can pass i64
-        ([a, b], side(0).saturating_mul(side(1)).saturating_mul(side(2)))
+        (
+            [a, b],
+            side(0).saturating_mul(side(1)).saturating_mul(side(2)),
+        )
     }
 
     /// Inserts `id` into every cell the box `[lo, hi]` touches; false (not stored)
@@ -171,7 +174,10 @@ mod tests {
     fn far_and_huge_boxes_are_well_defined() {
         let mut g = Grid::new(1e-3, DVec3::ZERO);
         let huge = DVec3::splat(1e300);
-        assert!(!g.insert_box(-huge, huge, 0), "spans every cell: kept apart");
+        assert!(
+            !g.insert_box(-huge, huge, 0),
+            "spans every cell: kept apart"
+        );
         assert!(g.insert_box(huge, huge, 1));
         assert!(g.insert_box(DVec3::splat(f64::NAN), DVec3::splat(f64::NAN), 2));
         let mut out = Vec::new();
