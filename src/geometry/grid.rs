@@ -93,7 +93,8 @@ impl Grid {
     }
 
     /// Inserts `id` into every cell the box `[lo, hi]` touches; false (not stored)
-    /// when it spans more than [`MAX_CELLS`] cells or none.
+    /// when it spans more than [`MAX_CELLS`] cells or none. Each id is inserted once
+    /// (a query finds an id by the one cell range it keeps).
     pub fn insert_box(&mut self, lo: DVec3, hi: DVec3, id: u32) -> bool {
         let (r, cells) = self.range(lo, hi);
         if !(1..=MAX_CELLS).contains(&cells) {
@@ -128,8 +129,11 @@ impl Grid {
     pub fn query_box(&self, lo: DVec3, hi: DVec3, out: &mut Vec<u32>) {
         out.clear();
         let ([qa, qb], cells) = self.range(lo, hi);
+        if cells == 0 {
+            return; // an empty box (a corner past the other, or NaN)
+        }
         let meets = |[a, b]: [[i32; 3]; 2]| (0..3).all(|k| a[k] <= qb[k] && qa[k] <= b[k]);
-        if cells == 0 || cells > MAX_CELLS * 8 {
+        if cells > MAX_CELLS * 8 {
             // a huge query box: every stored id's own range instead
             for (id, r) in self.ranges.iter().enumerate() {
                 if r.is_some_and(meets) {
