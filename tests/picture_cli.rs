@@ -13,10 +13,12 @@ fn filled() -> [u8; 3] {
     holefill::picture::status_color(holefill::report::HoleStatus::Filled)
 }
 
-/// Decodes a PNG: width, height, RGB bytes.
+/// Decodes a PNG (indexed: expanded to its palette's colours): width, height, RGB
+/// bytes.
 fn decode(path: &Path) -> (usize, usize, Vec<u8>) {
     let file = fs::File::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let dec = png::Decoder::new(std::io::BufReader::new(file));
+    let mut dec = png::Decoder::new(std::io::BufReader::new(file));
+    dec.set_transformations(png::Transformations::EXPAND);
     let mut reader = dec.read_info().expect("a PNG header");
     let mut buf = vec![0; reader.output_buffer_size().expect("size")];
     let info = reader.next_frame(&mut buf).expect("a PNG frame");

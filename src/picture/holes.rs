@@ -2,7 +2,6 @@
 //! a face, where the overview looks from, which holes get a close-up and the faces
 //! around each.
 
-use super::status_color;
 use crate::io::RawMesh;
 use crate::report::{HoleStatus, HoleTrace, RepairReport};
 use glam::DVec3;
@@ -117,14 +116,6 @@ impl Owners {
         let i = self.0.partition_point(|r| r.0 <= f);
         let &(start, end, status) = self.0.get(i.checked_sub(1)?)?;
         (start <= f && f < end).then_some(status)
-    }
-}
-
-pub(super) fn patch_color(s: HoleStatus) -> [f32; 3] {
-    match s {
-        HoleStatus::Filled => super::PATCH,
-        // a patch of a hole not filled cannot be; shown in the status colour anyway
-        other => status_color(other).map(f32::from),
     }
 }
 
@@ -285,6 +276,14 @@ pub(super) fn neighbourhoods(
     out
 }
 
+/// The rings of the boundary loops of the faces `faces` ([`soup_loops`]).
+pub(super) fn loop_rings(pos: &[DVec3], faces: &[[u32; 3]]) -> Vec<Ring> {
+    soup_loops(faces, pos.len())
+        .iter()
+        .filter_map(|l| Ring::new(pos, l))
+        .collect()
+}
+
 /// The boundary loops of a triangle soup as the repair finds its holes, before it
 /// does (oriented against the faces, as [`HoleTrace::boundary`]): an edge `a -> b` of
 /// a face is on the boundary when no other face has it, either way round. Faces with
@@ -322,8 +321,8 @@ pub(super) fn soup_loops(faces: &[[u32; 3]], vertices: usize) -> Vec<Vec<u32>> {
     let mut forked = vec![false; vertices];
     for a in 0..vertices as u32 {
         for &b in out(a) {
-            let once = out(a).iter().filter(|&&c| c == b).count() == 1;
-            if once && !out(b).contains(&a) {
+            // most edges have their twin: looked for first
+            if !out(b).contains(&a) && out(a).iter().filter(|&&c| c == b).count() == 1 {
                 let n = &mut next[b as usize];
                 if *n == NONE {
                     *n = a;

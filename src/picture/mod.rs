@@ -6,27 +6,33 @@
 //!
 //! How: a small software rasteriser ([`raster`]): orthographic views, one flat-shaded
 //! colour per triangle (a head light; back faces, seen through holes, bluish), a
-//! depth buffer, outlines drawn over the surface and faded where it hides them. The
-//! overview looks at the holes (along the mean of their normals, else at the
-//! largest), each close-up along its hole's normal (the loop's area vector, else the
-//! mean normal around it).
+//! depth buffer, outlines drawn over the surface and faded where it hides them; 256
+//! colours ([`palette`]), a byte a pixel, an indexed PNG. The overview looks at the
+//! input's boundary loops (along the mean of their normals, else at the largest),
+//! each close-up along its hole's normal (the loop's area vector, else the mean
+//! normal around it).
 //!
 //! Two steps, so that a picture costs the repair little: a [`Sketch`] draws what the
-//! input and its holes decide (the overview's surface, the close-ups' surfaces of the
-//! largest holes) while the holes are filled, and [`Sketch::finish`] the rest (the
-//! patches, outlines and numbers, the close-ups of other holes) once they are; what
-//! it keeps is what [`render`], which draws everything after the repair, would have
-//! drawn, bit for bit (a test holds them equal).
+//! input decides (the overview's surface, the close-ups' surfaces of the largest
+//! boundary loops) while the holes are filled, and [`Sketch::finish`] the rest (the
+//! patches, outlines and numbers, the close-ups of other holes) once they are. It
+//! keeps what the sketch drew where the repaired model's first faces have the input's
+//! corner points, bit for bit (the repair may renumber a vertex it does not move);
+//! where it also kept the input's vertex numbers, the picture is the one [`render`],
+//! which draws everything after the repair, draws, bit for bit (a test holds them
+//! equal).
 //!
 //! Bounded time and memory for huge meshes: memory is the image and its depth buffers
-//! (about 4 MB at the default width) plus the face numbers of the close-ups'
+//! (about 2 MB at the default width) plus the face numbers of the close-ups'
 //! neighbourhoods; the overview draws at most [`Options::max_overview_faces`] of the
-//! surface's faces (every k-th one: far more than its pixels) and the patches, and the close-ups' neighbourhoods are
-//! found in one pass over the faces that looks up one grid cell per face (a bit mask
-//! of the close-ups near it) and measures only the faces near a hole.
+//! surface's faces (every k-th one: far more than its pixels) and the patches, and the
+//! close-ups' neighbourhoods are found in one pass over the faces that looks up one
+//! grid cell per face (a bit mask of the close-ups near it) and measures only the
+//! faces near a hole.
 
 mod font;
 mod holes;
+mod palette;
 mod panels;
 mod raster;
 mod sketch;
@@ -37,9 +43,11 @@ pub use sketch::Sketch;
 use crate::io::RawMesh;
 use crate::report::{HoleStatus, RepairReport};
 use holes::{
-    bounds, choose_closeups, hole_views, neighbourhoods, overview_direction, HoleView, Owners, Ring,
+    bounds, choose_closeups, hole_views, loop_rings, neighbourhoods, overview_direction, HoleView,
+    Owners, Ring,
 };
-use raster::{Panel, Rgb};
+use palette::{status_ink, Ink, BAND, BG, TEXT};
+use raster::Panel;
 use rayon::prelude::*;
 use view::Camera;
 
@@ -70,13 +78,13 @@ impl Default for Options {
     }
 }
 
-/// An RGB image, 8 bits per channel, rows top first.
+/// An image of 256 colours: a palette index per pixel, rows top first.
 #[derive(Clone, Debug)]
 pub struct Picture {
     pub width: usize,
     pub height: usize,
-    /// `width * height * 3` bytes.
-    pub rgb: Vec<u8>,
+    /// `width * height` palette indices.
+    pub index: Vec<u8>,
 }
 
 /// The picture could not be encoded.
@@ -87,27 +95,35 @@ pub struct PictureError(String);
 impl Picture {
     /// The colour of a pixel (`None` outside the image).
     pub fn pixel(&self, x: usize, y: usize) -> Option<[u8; 3]> {
-        (x < self.width && y < self.height).then(|| {
-            let i = 3 * (y * self.width + x);
-            [self.rgb[i], self.rgb[i + 1], self.rgb[i + 2]]
-        })
+        (x < self.width && y < self.height)
+            .then(|| palette::palette()[self.index[y * self.width + x] as usize])
     }
 
-    /// The image as a PNG file's bytes (the fastest compression, rows filtered by
-    /// `Up`: the picture must cost little next to the repair).
+    /// The colours of the pixels, rows top first.
+    pub fn pixels(&self) -> impl Iterator<Item = [u8; 3]> + '_ {
+        let p = palette::palette();
+        self.index.iter().map(|&i| p[i as usize])
+    }
+
+    /// The image as an indexed PNG file's bytes (the fastest compression, rows
+    /// filtered by `Up`, which makes the panels' flat and repeated rows runs of zeros:
+    /// a quarter of the bytes and half the time of no filter; the picture must cost
+    /// little next to the repair).
     pub fn to_png(&self) -> Result<Vec<u8>, PictureError> {
-        let mut out = Vec::with_capacity(self.rgb.len() / 4);
+        let mut out = Vec::with_capacity(self.index.len() / 4);
         {
             let w = u32::try_from(self.width).map_err(|e| PictureError(e.to_string()))?;
             let h = u32::try_from(self.height).map_err(|e| PictureError(e.to_string()))?;
             let mut enc = png::Encoder::new(&mut out, w, h);
-            enc.set_color(png::ColorType::Rgb);
+            enc.set_color(png::ColorType::Indexed);
             enc.set_depth(png::BitDepth::Eight);
+            enc.set_palette(palette::palette().as_flattened());
             enc.set_compression(png::Compression::Fastest);
+            enc.set_filter(png::Filter::Up);
             let mut wr = enc
                 .write_header()
                 .map_err(|e| PictureError(e.to_string()))?;
-            wr.write_image_data(&self.rgb)
+            wr.write_image_data(&self.index)
                 .map_err(|e| PictureError(e.to_string()))?;
             wr.finish().map_err(|e| PictureError(e.to_string()))?;
         }
@@ -118,21 +134,12 @@ impl Picture {
 /// The colour of a hole's outline and label.
 pub fn status_color(s: HoleStatus) -> [u8; 3] {
     match s {
-        HoleStatus::Filled | HoleStatus::Stitched => FILLED,
-        HoleStatus::Skipped => SKIPPED,
-        HoleStatus::Failed => FAILED,
+        HoleStatus::Filled | HoleStatus::Stitched => palette::FILLED_RGB,
+        HoleStatus::Skipped => palette::SKIPPED_RGB,
+        HoleStatus::Failed => palette::FAILED_RGB,
     }
 }
 
-const FILLED: Rgb = [46, 204, 113];
-const SKIPPED: Rgb = [243, 176, 26];
-const FAILED: Rgb = [235, 64, 52];
-const BG: Rgb = [30, 34, 40];
-const BAND: Rgb = [18, 20, 24];
-const TEXT: Rgb = [230, 230, 230];
-const FRONT: [f32; 3] = [210.0, 208.0, 200.0];
-const BACK: [f32; 3] = [95.0, 110.0, 150.0];
-const PATCH: [f32; 3] = [70.0, 200.0, 120.0];
 const HEADER: usize = 20;
 const TILE_BAND: usize = 14;
 
@@ -147,6 +154,8 @@ pub fn render(mesh: &RawMesh, report: &RepairReport, opts: &Options) -> Picture 
 struct Kept {
     /// The number of faces the sketch's surface had.
     surface: usize,
+    /// The surface's bounds and the overview's direction, as [`draw`] finds them.
+    view: View,
     overview: Option<(Camera, Panel)>,
     tiles: Vec<sketch::Tile>,
 }
@@ -161,16 +170,22 @@ fn draw(mesh: &RawMesh, report: &RepairReport, opts: &Options, kept: Option<Kept
     let first_patch = first_patch(&holes, faces.len());
     let owners = Owners::new(&holes);
     let stride = overview_stride(first_patch, opts);
-    let (lo, hi) = bounds(pos, &faces[..first_patch], stride);
     let over_h = width * 5 / 8;
     let chosen = choose_closeups(&holes, opts.max_closeups);
     let tile = width / 4;
-    let dir = overview_direction(holes.iter().map(|h| &h.ring));
+    let kept = kept.filter(|k| k.surface == first_patch);
+    let View { lo, hi, dir } = match &kept {
+        Some(k) => k.view,
+        None => {
+            let surface = &faces[..first_patch];
+            View::of(pos, surface, stride, &loop_rings(pos, surface))
+        }
+    };
     let cam = lo
         .cmple(hi)
         .all()
         .then(|| Camera::fit(dir, lo, hi, width, over_h, 0.92));
-    let (mut kept_over, mut kept_tiles) = match kept.filter(|k| k.surface == first_patch) {
+    let (mut kept_over, mut kept_tiles) = match kept {
         Some(k) => (k.overview, k.tiles),
         None => (None, Vec::new()),
     };
@@ -248,6 +263,26 @@ fn draw(mesh: &RawMesh, report: &RepairReport, opts: &Options, kept: Option<Kept
     compose(report, &holes, &chosen, over, tiles, width)
 }
 
+/// Where the overview looks from: the bounds of the input's surface (every
+/// `stride`-th face) and the direction towards its boundary loops (the holes as the
+/// input has them, which a sketch knows before the repair ends: so that the overview
+/// a sketch draws is the one kept).
+#[derive(Clone, Copy, Debug)]
+struct View {
+    lo: glam::DVec3,
+    hi: glam::DVec3,
+    dir: glam::DVec3,
+}
+
+impl View {
+    /// The view of the surface `surface` whose boundary loops are `rings`.
+    fn of(pos: &[glam::DVec3], surface: &[[u32; 3]], stride: usize, rings: &[Ring]) -> View {
+        let (lo, hi) = bounds(pos, surface, stride);
+        let dir = overview_direction(rings.iter());
+        View { lo, hi, dir }
+    }
+}
+
 /// The first face of a patch (the faces before it are the input's surface).
 fn first_patch(holes: &[HoleView], faces: usize) -> usize {
     holes
@@ -284,7 +319,7 @@ fn compose(
         let h = &holes[i];
         let x = (k % 2) * 2 * tile;
         let y = HEADER + over_h + (k / 2) * (TILE_BAND + tile);
-        let c = status_color(h.status);
+        let c = status_ink(h.status);
         pic.rect(x, y, 2 * tile, TILE_BAND, BAND);
         pic.rect(x, y + TILE_BAND - 2, 2 * tile, 2, c);
         pic.text(x + 4, y + 3, &format!("#{} before", h.id), TEXT, 1);
@@ -309,7 +344,7 @@ fn compose(
     Picture {
         width,
         height,
-        rgb: pic.rgb,
+        index: pic.px,
     }
 }
 
@@ -317,20 +352,29 @@ fn compose(
 fn header(pic: &mut Panel, report: &RepairReport, shown: usize) {
     let s = &report.summary;
     let mut x = 6;
-    let mut put = |pic: &mut Panel, t: &str, c: Rgb| {
+    let mut put = |pic: &mut Panel, t: &str, c: Ink| {
         pic.text(x, 6, t, c, 1);
         x += t.chars().count() * font::ADVANCE;
     };
     put(pic, &format!("{} holes: ", s.holes.max(shown)), TEXT);
-    put(pic, &format!("{} filled", s.filled), FILLED);
+    let filled = status_ink(HoleStatus::Filled);
+    put(pic, &format!("{} filled", s.filled), filled);
     put(pic, ", ", TEXT);
     if s.stitched > 0 {
-        put(pic, &format!("{} stitched", s.stitched), FILLED);
+        put(pic, &format!("{} stitched", s.stitched), filled);
         put(pic, ", ", TEXT);
     }
-    put(pic, &format!("{} skipped", s.skipped), SKIPPED);
+    put(
+        pic,
+        &format!("{} skipped", s.skipped),
+        status_ink(HoleStatus::Skipped),
+    );
     put(pic, ", ", TEXT);
-    put(pic, &format!("{} failed", s.failed), FAILED);
+    put(
+        pic,
+        &format!("{} failed", s.failed),
+        status_ink(HoleStatus::Failed),
+    );
     put(
         pic,
         &format!("   faces {} -> {}", report.before.faces, report.after.faces),

@@ -3,10 +3,11 @@
 //! Each panel is drawn in two steps, the surface first, so that a [`super::Sketch`]
 //! can draw the surface while the holes are filled.
 
-use super::holes::{patch_color, HoleView, Near, Owners, Ring};
+use super::font;
+use super::holes::{HoleView, Near, Owners, Ring};
+use super::palette::{hidden_ink, status_ink, Ink, Material, BAND, BG};
 use super::raster::Panel;
 use super::view::{corners, draw_face, outline, shade_projected, Camera};
-use super::{font, status_color, BAND, BG};
 use crate::io::RawMesh;
 use glam::DVec3;
 
@@ -62,32 +63,35 @@ pub(super) fn overview_finish(
     for (f, &face) in mesh.faces.iter().enumerate().skip(first_patch) {
         if let Some(world) = corners(pos, face) {
             let s = world.map(|p| cam.project(p));
-            let color = owners.status(f as u32).map(patch_color);
-            over.triangle(s, shade_projected(cam, s, color));
+            let status = owners.status(f as u32);
+            over.triangle(s, shade_projected(cam, s, status));
         }
     }
     let bias = (cam.extent * 0.004) as f32;
     for h in holes {
-        let c = status_color(h.status);
-        outline(&mut over, cam, pos, &h.ring.boundary, c, 3, bias, 0.45);
+        let (c, faded) = (status_ink(h.status), hidden_ink(h.status, true));
+        outline(
+            &mut over,
+            cam,
+            pos,
+            &h.ring.boundary,
+            c,
+            3,
+            bias,
+            Some(faded),
+        );
     }
     if holes.len() <= 60 {
         for h in holes {
             let [x, y, _] = cam.project(h.ring.center);
-            label(
-                &mut over,
-                x,
-                y,
-                &format!("#{}", h.id),
-                status_color(h.status),
-            );
+            label(&mut over, x, y, &format!("#{}", h.id), status_ink(h.status));
         }
     }
     over
 }
 
 /// `text` beside a screen point, on a dark backing.
-pub(super) fn label(panel: &mut Panel, x: f32, y: f32, text: &str, color: super::Rgb) {
+pub(super) fn label(panel: &mut Panel, x: f32, y: f32, text: &str, color: Ink) {
     if !(x.is_finite() && y.is_finite()) {
         return;
     }
@@ -147,18 +151,17 @@ pub(super) fn finish_tiles(
             continue;
         }
         if let (Some(&face), Some(status)) = (faces.get(f as usize), owners.status(f)) {
-            draw_face(&mut after, cam, pos, face, Some(patch_color(status)));
+            draw_face(&mut after, cam, pos, face, Some(status));
         }
     }
     let patch = h.patch.start as usize..(h.patch.end as usize).min(faces.len());
-    let tint = patch_color(h.status);
     for face in &faces[patch.clone()] {
-        draw_face(&mut after, cam, pos, *face, Some(tint));
+        draw_face(&mut after, cam, pos, *face, Some(h.status));
     }
     let px_area = std::f64::consts::PI * (h.ring.radius * cam.scale).powi(2);
     let edge_px = (2.0 * px_area / patch.len().max(1) as f64).sqrt();
     if !patch.is_empty() && edge_px >= 6.0 {
-        let wire = tint.map(|x| (x * 0.45) as u8);
+        let wire = Material::Patch(h.status).wire();
         for face in &faces[patch] {
             for i in 0..3 {
                 let (Some(&p), Some(&q)) = (
@@ -167,11 +170,11 @@ pub(super) fn finish_tiles(
                 ) else {
                     continue;
                 };
-                after.line(cam.project(p), cam.project(q), wire, 1, bias * 0.5, 0.0);
+                after.line(cam.project(p), cam.project(q), wire, 1, bias * 0.5, None);
             }
         }
     }
-    let color = status_color(h.status);
+    let (color, faded) = (status_ink(h.status), Some(hidden_ink(h.status, false)));
     outline(
         &mut before,
         cam,
@@ -180,9 +183,18 @@ pub(super) fn finish_tiles(
         color,
         2,
         bias,
-        0.35,
+        faded,
     );
-    outline(&mut after, cam, pos, &h.ring.boundary, color, 2, bias, 0.35);
+    outline(
+        &mut after,
+        cam,
+        pos,
+        &h.ring.boundary,
+        color,
+        2,
+        bias,
+        faded,
+    );
     (before, after)
 }
 

@@ -4,11 +4,11 @@
 //! keeps of the sketch only what it would have drawn the same: the picture is the one
 //! [`super::render`] draws, to the bit.
 
-use super::holes::{bounds, neighbourhoods, overview_direction, soup_loops, Ring};
+use super::holes::{loop_rings, neighbourhoods, Ring};
 use super::panels::{before_tile, closeup_camera, overview_surface};
 use super::raster::Panel;
 use super::view::Camera;
-use super::{draw, overview_stride, Kept, Options, Picture};
+use super::{draw, overview_stride, Kept, Options, Picture, View};
 use crate::io::RawMesh;
 use crate::report::RepairReport;
 use glam::DVec3;
@@ -36,6 +36,8 @@ pub struct Sketch {
     width: usize,
     max_overview_faces: usize,
     max_closeup_faces: usize,
+    /// The surface's bounds and the overview's direction.
+    view: View,
     pub(super) overview: Option<(Camera, Panel)>,
     pub(super) tiles: Vec<Tile>,
 }
@@ -53,36 +55,40 @@ impl Sketch {
     /// largest loops for their close-ups (the repair decides which holes get one: the
     /// failed ones first; the largest are those in the common case).
     pub fn new(input: &RawMesh, opts: &Options) -> Sketch {
-        let loops = soup_loops(&input.faces, input.positions.len());
-        Sketch::from_loops(input, &loops, opts)
+        let (pos, faces) = (&input.positions, &input.faces);
+        let rings = loop_rings(pos, faces);
+        let view = View::of(pos, faces, overview_stride(faces.len(), opts), &rings);
+        Sketch::with(input, &rings, view, opts)
     }
 
-    /// [`Sketch::new`] looking at the loops `loops`.
+    /// [`Sketch::new`] taking `loops` for the input's boundary loops (the overview
+    /// looks at them, the close-ups are theirs).
+    #[cfg(test)]
     pub(super) fn from_loops(input: &RawMesh, loops: &[Vec<u32>], opts: &Options) -> Sketch {
+        let (pos, faces) = (&input.positions, &input.faces);
+        let rings: Vec<Ring> = loops.iter().filter_map(|l| Ring::new(pos, l)).collect();
+        let view = View::of(pos, faces, overview_stride(faces.len(), opts), &rings);
+        Sketch::with(input, &rings, view, opts)
+    }
+
+    fn with(input: &RawMesh, rings: &[Ring], view: View, opts: &Options) -> Sketch {
         let width = opts.width.max(320);
         let (over_h, tile) = (width * 5 / 8, width / 4);
         let (pos, faces) = (&input.positions, &input.faces);
         let stride = overview_stride(faces.len(), opts);
-        let (lo, hi) = bounds(pos, faces, stride);
-        let rings: Vec<Ring> = loops.iter().filter_map(|l| Ring::new(pos, l)).collect();
+        let View { lo, hi, dir } = view;
         let mut sketch = Sketch {
             width,
             max_overview_faces: opts.max_overview_faces,
             max_closeup_faces: opts.max_closeup_faces,
+            view,
             overview: None,
             tiles: Vec::new(),
         };
         if !lo.cmple(hi).all() {
             return sketch;
         }
-        let cam = Camera::fit(
-            overview_direction(rings.iter()),
-            lo,
-            hi,
-            width,
-            over_h,
-            0.92,
-        );
+        let cam = Camera::fit(dir, lo, hi, width, over_h, 0.92);
         let surface = overview_surface(input, faces.len(), stride, &cam, (width, over_h));
         sketch.overview = Some((cam, surface));
 
@@ -129,6 +135,7 @@ impl Sketch {
             && self.max_closeup_faces == opts.max_closeup_faces;
         let kept = (same_options && same_surface(input, mesh)).then_some(Kept {
             surface: input.faces.len(),
+            view: self.view,
             overview: self.overview,
             tiles: self.tiles,
         });
@@ -136,16 +143,17 @@ impl Sketch {
     }
 }
 
-/// The repaired model's first faces are the input's faces, and its first vertices the
-/// input's, bit for bit (that the faces after them are patches, [`draw`] checks).
+/// The repaired model's first faces are the input's faces where it matters to a
+/// picture: the same corner points, bit for bit, in the same order (the repair may
+/// have renumbered a vertex, splitting a non-manifold one, without moving it); that
+/// the faces after them are patches, [`draw`] checks.
 fn same_surface(input: &RawMesh, mesh: &RawMesh) -> bool {
-    let n = input.faces.len();
-    let bits = |p: &DVec3| p.to_array().map(f64::to_bits);
-    mesh.faces.get(..n) == Some(&input.faces[..])
-        && input.positions.len() <= mesh.positions.len()
-        && input
-            .positions
-            .iter()
-            .zip(&mesh.positions)
-            .all(|(a, b)| bits(a) == bits(b))
+    let Some(out) = mesh.faces.get(..input.faces.len()) else {
+        return false;
+    };
+    let corner =
+        |pos: &[DVec3], v: u32| pos.get(v as usize).map(|p| p.to_array().map(f64::to_bits));
+    out.iter().zip(&input.faces).all(|(a, b)| {
+        (0..3).all(|k| corner(&mesh.positions, a[k]) == corner(&input.positions, b[k]))
+    })
 }

@@ -1,3 +1,4 @@
+use super::palette::{FILLED_RGB as FILLED, SKIPPED_RGB as SKIPPED};
 use super::*;
 use crate::policy::Policy;
 use crate::report::RepairReport;
@@ -68,14 +69,13 @@ fn a_filled_hole_is_outlined_green_and_its_patch_shows_only_after() {
         HEADER + over_h + TILE_BAND + tile,
         "one close-up row"
     );
-    assert_eq!(pic.rgb.len(), pic.width * pic.height * 3);
+    assert_eq!(pic.index.len(), pic.width * pic.height);
 
     // the overview: the outline in the filled colour, the surface lit
     let green = count(&pic, 0, HEADER, pic.width, over_h, FILLED);
     assert!(green > 200, "outline pixels: {green}");
     let lit = pic
-        .rgb
-        .chunks(3)
+        .pixels()
         .filter(|c| c[0] > 120 && c[1] > 120 && c[2] > 110)
         .count();
     assert!(lit > 10_000, "surface pixels: {lit}");
@@ -100,7 +100,22 @@ fn a_filled_hole_is_outlined_green_and_its_patch_shows_only_after() {
 
     let png = pic.to_png().unwrap();
     assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
-    assert!(png.len() > 1000 && png.len() < pic.rgb.len());
+    assert!(png.len() > 1000 && png.len() < pic.index.len());
+    // it decodes to the same colours
+    let mut dec = png::Decoder::new(std::io::Cursor::new(&png));
+    dec.set_transformations(png::Transformations::EXPAND);
+    let mut reader = dec.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    assert_eq!(
+        (info.width as usize, info.height as usize),
+        (pic.width, pic.height)
+    );
+    assert_eq!(info.color_type, png::ColorType::Rgb);
+    assert!(buf[..info.buffer_size()]
+        .chunks(3)
+        .zip(pic.pixels())
+        .all(|(a, b)| a == b));
 }
 
 #[test]
@@ -158,7 +173,7 @@ fn the_overview_of_a_huge_mesh_draws_a_bounded_share_of_its_faces() {
     };
     let few = render(&out, &report, &opts);
     assert_eq!(few.width, 320);
-    let lit = |p: &Picture| p.rgb.chunks(3).filter(|c| c[0] > 120 && c[1] > 120).count();
+    let lit = |p: &Picture| p.pixels().filter(|c| c[0] > 120 && c[1] > 120).count();
     assert!(lit(&few) > 0 && lit(&few) < lit(&full));
 }
 
@@ -224,7 +239,7 @@ fn a_sketch_finishes_into_the_picture_render_draws() {
     let got = sketch.finish(&raw, &out, &report, &opts);
     assert_eq!((got.width, got.height), (want.width, want.height));
     assert!(
-        got.rgb == want.rgb,
+        got.index == want.index,
         "the finished sketch differs from render"
     );
 
@@ -232,19 +247,21 @@ fn a_sketch_finishes_into_the_picture_render_draws() {
     let mut turned: Vec<Vec<u32>> = loops.iter().rev().cloned().collect();
     turned[0].rotate_left(3);
     let got = Sketch::from_loops(&raw, &turned, &opts).finish(&raw, &out, &report, &opts);
-    assert!(got.rgb == want.rgb);
+    assert!(got.index == want.index);
     // other options than the sketch's: drawn again, the same as render
     let small = Options {
         width: 320,
         ..Options::default()
     };
     let got = Sketch::from_loops(&raw, &loops, &opts).finish(&raw, &out, &report, &small);
-    assert!(got.rgb == render(&out, &report, &small).rgb);
+    assert!(got.index == render(&out, &report, &small).index);
 }
 
 #[test]
 fn what_the_sketch_drew_is_kept_only_where_the_surface_is_the_inputs() {
-    const MARK: [u8; 3] = [255, 0, 255];
+    // a mark in the text's ink, which the overview and the tiles never draw: the
+    // marks are the text's pixels beyond render's
+    const MARK: Ink = TEXT;
     let raw = holed_sphere(0.5, Some(0.35));
     let marked = |loops: &[Vec<u32>]| {
         let mut s = Sketch::from_loops(&raw, loops, &Options::default());
@@ -256,19 +273,36 @@ fn what_the_sketch_drew_is_kept_only_where_the_surface_is_the_inputs() {
         s
     };
     let opts = Options::default();
-    let marks = |p: &Picture| p.rgb.chunks(3).filter(|c| *c == MARK).count();
+    let text = |p: &Picture| p.index.iter().filter(|&&c| c == MARK).count();
+    let marks = |p: &Picture, out: &RawMesh, report: &RepairReport| {
+        text(p) - text(&render(out, report, &opts))
+    };
 
     // kept: the overview's and both close-ups' marks (before and after tiles)
     let (out, report, loops) = repair_seen(&raw, &Policy::default_policy());
     let pic = marked(&loops).finish(&raw, &out, &report, &opts);
-    assert_eq!(marks(&pic), 9 * (1 + 2 * 2));
+    assert_eq!(marks(&pic, &out, &report), 9 * (1 + 2 * 2));
 
-    // a loop the repair did not report: its close-up is drawn again, and the overview
-    // (which looks at the loops) too; the other close-up is kept
+    // a loop the repair did not report: its close-up is drawn again; the other
+    // close-up and the overview (which looks at the input's loops) are kept
     let mut other = loops.clone();
     other[0].pop();
     let pic = marked(&other).finish(&raw, &out, &report, &opts);
-    assert_eq!(marks(&pic), 9 * 2);
+    assert_eq!(marks(&pic, &out, &report), 9 * (1 + 2));
+
+    // the repair gave a vertex of the input's surface a new number without moving it
+    // (as splitting a non-manifold vertex does): what the sketch drew is kept
+    let mut renumbered = out.clone();
+    let v = renumbered.faces[0][0];
+    renumbered.positions.push(renumbered.positions[v as usize]);
+    renumbered.faces[0][0] = (renumbered.positions.len() - 1) as u32;
+    let pic = marked(&loops).finish(&raw, &renumbered, &report, &opts);
+    assert_eq!(marks(&pic, &renumbered, &report), 9 * (1 + 2 * 2));
+    // moved, even by a bit: nothing is kept
+    let mut moved = out.clone();
+    moved.positions[v as usize].x = f64::from_bits(moved.positions[v as usize].x.to_bits() ^ 1);
+    let pic = marked(&loops).finish(&raw, &moved, &report, &opts);
+    assert_eq!(marks(&pic, &moved, &report), 0);
 
     // smoothing moves the input's vertices: nothing kept, the picture is render's
     let policy = Policy::from_toml_str(
@@ -278,6 +312,6 @@ fn what_the_sketch_drew_is_kept_only_where_the_surface_is_the_inputs() {
     .unwrap();
     let (out, report, loops) = repair_seen(&raw, &policy);
     let pic = marked(&loops).finish(&raw, &out, &report, &opts);
-    assert_eq!(marks(&pic), 0);
-    assert!(pic.rgb == render(&out, &report, &opts).rgb);
+    assert_eq!(marks(&pic, &out, &report), 0);
+    assert!(pic.index == render(&out, &report, &opts).index);
 }

@@ -1,8 +1,9 @@
 //! Cameras and shading: orthographic views, one flat-shaded colour per triangle (a
 //! head light; back faces, seen through holes, bluish), loops drawn as outlines.
 
-use super::raster::{Panel, Rgb};
-use super::{BACK, FRONT};
+use super::palette::{Ink, Material};
+use super::raster::Panel;
+use crate::report::HoleStatus;
 use glam::DVec3;
 
 /// An orthographic camera: looks along `-dir` (from outside, where `dir` points).
@@ -97,19 +98,16 @@ pub(super) fn corners(pos: &[DVec3], f: [u32; 3]) -> Option<[DVec3; 3]> {
     ])
 }
 
-/// The flat-shaded colour of a face: `patch` is its colour when it belongs to a patch.
+/// The flat shade of a face: `patch` is its hole's status when it belongs to a patch.
 #[inline]
-fn shade(cam: &Camera, [a, b, c]: [DVec3; 3], patch: Option<[f32; 3]>) -> Rgb {
+fn shade(cam: &Camera, [a, b, c]: [DVec3; 3], patch: Option<HoleStatus>) -> Ink {
     let n = (b - a).cross(c - a).normalize_or_zero();
-    let facing = -n.dot(cam.fwd);
-    let base = match patch {
-        Some(p) => p,
-        None if facing >= 0.0 => FRONT,
-        None => BACK,
+    let material = match patch {
+        Some(s) => Material::Patch(s),
+        None if n.dot(cam.fwd) <= 0.0 => Material::Front,
+        None => Material::Back,
     };
-    let lit = n.dot(cam.light).abs() as f32;
-    let k = 0.28 + 0.72 * lit;
-    base.map(|x| (x * k).min(255.0) as u8)
+    material.shade(n.dot(cam.light).abs() as f32)
 }
 
 /// [`shade`] from a face's projected corners: the camera frame's coordinates are
@@ -120,32 +118,30 @@ fn shade(cam: &Camera, [a, b, c]: [DVec3; 3], patch: Option<[f32; 3]>) -> Rgb {
 pub(super) fn shade_projected(
     cam: &Camera,
     [a, b, c]: [[f32; 3]; 3],
-    patch: Option<[f32; 3]>,
-) -> Rgb {
+    patch: Option<HoleStatus>,
+) -> Ink {
     let inv = (1.0 / cam.scale) as f32;
     let e1 = glam::Vec3::new((b[0] - a[0]) * inv, (a[1] - b[1]) * inv, b[2] - a[2]);
     let e2 = glam::Vec3::new((c[0] - a[0]) * inv, (a[1] - c[1]) * inv, c[2] - a[2]);
     // the world normal in camera coordinates
     let n = -e1.cross(e2).normalize_or_zero();
-    let facing = -n.z;
-    let base = match patch {
-        Some(p) => p,
-        None if facing >= 0.0 => FRONT,
-        None => BACK,
+    let material = match patch {
+        Some(s) => Material::Patch(s),
+        None if n.z <= 0.0 => Material::Front,
+        None => Material::Back,
     };
-    let lit = n.dot(cam.light_cam).abs();
-    let k = 0.28 + 0.72 * lit;
-    base.map(|x| (x * k).min(255.0) as u8)
+    material.shade(n.dot(cam.light_cam).abs())
 }
 
-/// Draws one face, flat-shaded: `patch` is its colour when it belongs to a patch.
+/// Draws one face, flat-shaded: `patch` is its hole's status when it belongs to a
+/// patch.
 #[inline]
 pub(super) fn draw_face(
     panel: &mut Panel,
     cam: &Camera,
     pos: &[DVec3],
     f: [u32; 3],
-    patch: Option<[f32; 3]>,
+    patch: Option<HoleStatus>,
 ) {
     let Some(world) = corners(pos, f) else {
         return;
@@ -153,17 +149,17 @@ pub(super) fn draw_face(
     panel.triangle(world.map(|p| cam.project(p)), shade(cam, world, patch));
 }
 
-/// Draws a boundary loop.
+/// Draws a boundary loop; where the surface hides it, in `hidden`.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn outline(
     panel: &mut Panel,
     cam: &Camera,
     pos: &[DVec3],
     boundary: &[u32],
-    color: Rgb,
+    color: Ink,
     width: usize,
     bias: f32,
-    hidden: f32,
+    hidden: Option<Ink>,
 ) {
     let k = boundary.len();
     for i in 0..k {
