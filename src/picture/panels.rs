@@ -175,26 +175,9 @@ pub(super) fn finish_tiles(
         }
     }
     let (color, faded) = (status_ink(h.status), Some(hidden_ink(h.status, false)));
-    outline(
-        &mut before,
-        cam,
-        pos,
-        &h.ring.boundary,
-        color,
-        2,
-        bias,
-        faded,
-    );
-    outline(
-        &mut after,
-        cam,
-        pos,
-        &h.ring.boundary,
-        color,
-        2,
-        bias,
-        faded,
-    );
+    for tile in [&mut before, &mut after] {
+        outline(tile, cam, pos, &h.ring.boundary, color, 2, bias, faded);
+    }
     (before, after)
 }
 

@@ -46,7 +46,7 @@ impl Panel {
         if self.z.len() != self.w * self.h {
             return; // a flat panel
         }
-        let [[x0, y0, z0], [x1, y1, z1], [x2, y2, z2]] = v;
+        let [[x0, y0, _], [x1, y1, _], [x2, y2, _]] = v;
         let (w, h) = (self.w as f32, self.h as f32);
         // plain comparisons (a NaN corner is caught by the area test below)
         let min = |a: f32, b: f32| if a < b { a } else { b };
@@ -70,25 +70,25 @@ impl Panel {
         if !area.is_finite() || area.abs() <= 1e-12 {
             return; // edge-on, or not finite
         }
+        let plane = Plane::new(v, area);
         if px1 - px0 < SMALL
             && py1 - py0 < SMALL
             && [x0, y0, x1, y1, x2, y2].iter().all(|v| v.abs() < FIXED_MAX)
         {
-            self.small_triangle(v, (px0, px1), (py0, py1), c);
+            self.small_triangle(v, &plane, (px0, px1), (py0, py1), c);
             return;
         }
-        let inv = 1.0 / area;
-        // barycentric weights as affine functions of the pixel centre
-        let (a0, b0) = ((y1 - y2) * inv, (x2 - x1) * inv);
-        let (a1, b1) = ((y2 - y0) * inv, (x0 - x2) * inv);
-        let c0 = (x1 * y2 - x2 * y1) * inv;
-        let c1 = (x2 * y0 - x0 * y2) * inv;
-        // depth as an affine function of the pixel centre:
-        // z = l0 z0 + l1 z1 + l2 z2 = z2 + l0 (z0 - z2) + l1 (z1 - z2)
-        let (dz0, dz1) = (z0 - z2, z1 - z2);
-        let zx = a0 * dz0 + a1 * dz1;
-        let zy = b0 * dz0 + b1 * dz1;
-        let zc = z2 + c0 * dz0 + c1 * dz1;
+        let Plane {
+            a0,
+            b0,
+            a1,
+            b1,
+            c0,
+            c1,
+            zx,
+            zy,
+            zc,
+        } = plane;
         // l2 = 1 - l0 - l1, as an affine function of x on a row; the weights' zeros
         // on a row are at -r / a (a weight nearly constant along the row: none).
         // Only a triangle a few pixels wide or more looks for its span on each row.
@@ -161,6 +161,7 @@ impl Panel {
     fn small_triangle(
         &mut self,
         v: [[f32; 3]; 3],
+        plane: &Plane,
         (px0, px1): (usize, usize),
         (py0, py1): (usize, usize),
         c: Ink,
@@ -168,7 +169,7 @@ impl Panel {
         // truncation, not rounding (no call to libm's roundf): the same snapping
         // for every corner, so that faces sharing an edge share it snapped too
         let fixed = |t: f32| (t * SUB as f32) as i64;
-        let [[x0, y0, z0], [x1, y1, z1], [x2, y2, z2]] = v;
+        let [[x0, y0, _], [x1, y1, _], [x2, y2, _]] = v;
         let (fx, fy) = ([x0, x1, x2].map(fixed), [y0, y1, y2].map(fixed));
         let orient = (fx[1] - fx[0]) * (fy[2] - fy[0]) - (fx[2] - fx[0]) * (fy[1] - fy[0]);
         if orient == 0 {
@@ -187,15 +188,7 @@ impl Panel {
         let (e1, sx1, sy1) = edge(2, 0);
         let (e2, sx2, sy2) = edge(0, 1);
         // depth, affine in the pixel centre (in f32, from the unsnapped corners)
-        let inv = 1.0 / ((x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0));
-        let (a0, b0) = ((y1 - y2) * inv, (x2 - x1) * inv);
-        let (a1, b1) = ((y2 - y0) * inv, (x0 - x2) * inv);
-        let c0 = (x1 * y2 - x2 * y1) * inv;
-        let c1 = (x2 * y0 - x0 * y2) * inv;
-        let (dz0, dz1) = (z0 - z2, z1 - z2);
-        let zx = a0 * dz0 + a1 * dz1;
-        let zy = b0 * dz0 + b1 * dz1;
-        let zc = z2 + c0 * dz0 + c1 * dz1;
+        let (zx, zy, zc) = (plane.zx, plane.zy, plane.zc);
         let (mut r0, mut r1, mut r2) = (e0, e1, e2);
         let n = px1 - px0 + 1;
         for py in py0..py1 + 1 {
@@ -316,6 +309,47 @@ impl Panel {
     #[cfg(test)]
     pub fn at(&self, x: usize, y: usize) -> Ink {
         self.px[y * self.w + x]
+    }
+}
+
+/// The barycentric weights `l0`, `l1` of a triangle's corners 0 and 1 and its depth,
+/// as affine functions of the pixel centre `(x, y)`: `l0 = a0 x + b0 y + c0`, the
+/// same for `l1`, `z = zx x + zy y + zc`.
+struct Plane {
+    a0: f32,
+    b0: f32,
+    a1: f32,
+    b1: f32,
+    c0: f32,
+    c1: f32,
+    zx: f32,
+    zy: f32,
+    zc: f32,
+}
+
+impl Plane {
+    /// The plane of the triangle `v` of twice the signed area `area` (not 0).
+    #[inline]
+    fn new(v: [[f32; 3]; 3], area: f32) -> Plane {
+        let [[x0, y0, z0], [x1, y1, z1], [x2, y2, z2]] = v;
+        let inv = 1.0 / area;
+        let (a0, b0) = ((y1 - y2) * inv, (x2 - x1) * inv);
+        let (a1, b1) = ((y2 - y0) * inv, (x0 - x2) * inv);
+        let c0 = (x1 * y2 - x2 * y1) * inv;
+        let c1 = (x2 * y0 - x0 * y2) * inv;
+        // z = l0 z0 + l1 z1 + l2 z2 = z2 + l0 (z0 - z2) + l1 (z1 - z2)
+        let (dz0, dz1) = (z0 - z2, z1 - z2);
+        Plane {
+            a0,
+            b0,
+            a1,
+            b1,
+            c0,
+            c1,
+            zx: a0 * dz0 + a1 * dz1,
+            zy: b0 * dz0 + b1 * dz1,
+            zc: z2 + c0 * dz0 + c1 * dz1,
+        }
     }
 }
 
