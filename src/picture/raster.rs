@@ -155,9 +155,9 @@ impl Panel {
 
     /// [`Panel::triangle`] of a triangle of at most [`SMALL`] pixels each way (most
     /// faces of a picture), with the pixels `px0..=px1`, `py0..=py1` (not empty) of
-    /// its bounds: the corners in fixed point (1/256 pixel, truncated) and the edge functions
-    /// stepped in integers from pixel to pixel, exactly (a pixel centre on an edge
-    /// is inside). The depth is the same affine function as in the general case.
+    /// its bounds: the corners in fixed point (1/256 pixel, truncated) and the edge
+    /// functions stepped in integers from pixel to pixel, exactly (a pixel centre on
+    /// an edge is inside). The depth is the plane's, as in the general case.
     fn small_triangle(
         &mut self,
         v: [[f32; 3]; 3],

@@ -1,7 +1,8 @@
 //! The part of a picture that the input decides, drawn while it is repaired (the
-//! holes as the input's boundary loops): the overview's surface and the "before" surfaces of the largest
-//! holes' close-ups. [`Sketch::finish`] draws the rest once the repair is known and
-//! keeps of the sketch only what it would have drawn the same: the picture is the one
+//! holes as the input's boundary loops): the overview's surface and the "before"
+//! surfaces of the largest loops' close-ups. [`Sketch::finish`] draws the rest once
+//! the repair is known and keeps of the sketch what it would have drawn the same:
+//! where the repair kept the input's faces and vertex numbers, the picture is the one
 //! [`super::render`] draws, to the bit.
 
 use super::holes::{loop_rings, neighbourhoods, Ring};
@@ -121,8 +122,9 @@ impl Sketch {
 
     /// The picture of the repair of `input` (the input this sketch drew) into `mesh`
     /// with `report`: what the sketch drew is kept where the repaired model's surface
-    /// is the input's, bit for bit (faces up to the first patch, the input's vertices)
-    /// and drawn the same way (same options, camera and loop); the rest is drawn now.
+    /// is the input's, bit for bit (faces up to the first patch with the input's
+    /// corner points) and drawn the same way (same options, camera and loop); the rest
+    /// is drawn now.
     pub fn finish(
         self,
         input: &RawMesh,
