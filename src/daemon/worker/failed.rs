@@ -10,6 +10,7 @@ use crate::daemon::fsops::{self, FileId};
 use serde_json::{json, Value};
 use std::fs;
 use std::io;
+use std::path::Path;
 use std::time::SystemTime;
 
 /// Sends the file, untouched, to the failed folder with its log (`kept` false: not a
@@ -55,6 +56,23 @@ pub(super) fn fail(
     finish_failed(ctx, job, t, report)
 }
 
+/// Someone else's file took the failed file's name: records a free name beside it
+/// (a time stamp added) as its destination, for the next round.
+fn take_free_name(job: &mut Job, failed: &Path, taken: &str) {
+    let new = fsops::free_name(
+        failed,
+        taken,
+        &[".repair.json"],
+        SystemTime::now(),
+        Collision::Timestamp,
+        1,
+    );
+    if let Phase::Failed { dest, .. } = &mut job.rec.phase {
+        *dest = new;
+    }
+    let _ = job.save();
+}
+
 /// Moves the original to the failed folder (or removes an entry that is not a regular
 /// file) and writes its log there, each step only if not done yet.
 pub(super) fn finish_failed(ctx: &RunCtx, mut job: Job, t: Times, report: Option<Value>) -> Done {
@@ -93,19 +111,7 @@ pub(super) fn finish_failed(ctx: &RunCtx, mut job: Job, t: Times, report: Option
                     {
                         let _ = fs::remove_file(&src);
                     } else {
-                        let base = dest.clone();
-                        let new = fsops::free_name(
-                            &l.failed,
-                            &base,
-                            &[".repair.json"],
-                            SystemTime::now(),
-                            Collision::Timestamp,
-                            1,
-                        );
-                        if let Phase::Failed { dest, .. } = &mut job.rec.phase {
-                            *dest = new;
-                        }
-                        let _ = job.save();
+                        take_free_name(&mut job, &l.failed, &dest);
                         continue;
                     }
                 } else {
@@ -117,18 +123,7 @@ pub(super) fn finish_failed(ctx: &RunCtx, mut job: Job, t: Times, report: Option
                     match fsops::move_file(&src, &l.failed, dest.as_ref(), &copy, &|| {}) {
                         Ok(()) => {}
                         Err(e) if e.kind() == io::ErrorKind::AlreadyExists => {
-                            let new = fsops::free_name(
-                                &l.failed,
-                                &dest,
-                                &[".repair.json"],
-                                SystemTime::now(),
-                                Collision::Timestamp,
-                                1,
-                            );
-                            if let Phase::Failed { dest, .. } = &mut job.rec.phase {
-                                *dest = new;
-                            }
-                            let _ = job.save();
+                            take_free_name(&mut job, &l.failed, &dest);
                             continue;
                         }
                         Err(e) => {
