@@ -47,6 +47,18 @@ impl Panel {
             return; // a flat panel
         }
         let [[x0, y0, _], [x1, y1, _], [x2, y2, _]] = v;
+        // most faces: corners near the panel (false for NaN), small bounds
+        let near = |t: f32| t.abs() < FIXED_MAX;
+        if near(x0)
+            && near(y0)
+            && near(x1)
+            && near(y1)
+            && near(x2)
+            && near(y2)
+            && self.small_triangle(v, c)
+        {
+            return;
+        }
         let (w, h) = (self.w as f32, self.h as f32);
         // plain comparisons (a NaN corner is caught by the area test below)
         let min = |a: f32, b: f32| if a < b { a } else { b };
@@ -70,14 +82,6 @@ impl Panel {
         if !area.is_finite() || area.abs() <= 1e-12 {
             return; // edge-on, or not finite
         }
-        let plane = Plane::new(v, area);
-        if px1 - px0 < SMALL
-            && py1 - py0 < SMALL
-            && [x0, y0, x1, y1, x2, y2].iter().all(|v| v.abs() < FIXED_MAX)
-        {
-            self.small_triangle(v, &plane, (px0, px1), (py0, py1), c);
-            return;
-        }
         let Plane {
             a0,
             b0,
@@ -88,7 +92,7 @@ impl Panel {
             zx,
             zy,
             zc,
-        } = plane;
+        } = Plane::new(v, area);
         // l2 = 1 - l0 - l1, as an affine function of x on a row; the weights' zeros
         // on a row are at -r / a (a weight nearly constant along the row: none).
         // Only a triangle a few pixels wide or more looks for its span on each row.
@@ -153,27 +157,38 @@ impl Panel {
         }
     }
 
-    /// [`Panel::triangle`] of a triangle of at most [`SMALL`] pixels each way (most
-    /// faces of a picture), with the pixels `px0..=px1`, `py0..=py1` (not empty) of
-    /// its bounds: the corners in fixed point (1/256 pixel, truncated) and the edge
-    /// functions stepped in integers from pixel to pixel, exactly (a pixel centre on
-    /// an edge is inside). The depth is the plane's, as in the general case.
-    fn small_triangle(
-        &mut self,
-        v: [[f32; 3]; 3],
-        plane: &Plane,
-        (px0, px1): (usize, usize),
-        (py0, py1): (usize, usize),
-        c: Ink,
-    ) {
-        // truncation, not rounding (no call to libm's roundf): the same snapping
-        // for every corner, so that faces sharing an edge share it snapped too
-        let fixed = |t: f32| (t * SUB as f32) as i64;
+    /// [`Panel::triangle`] of a triangle with its corners within [`FIXED_MAX`] of the
+    /// panel's origin, when the pixels of its bounds are fewer than [`SMALL`] each way
+    /// (most faces of a picture; `false`, nothing drawn, otherwise). The corners in
+    /// fixed point (1/256 pixel, rounded), the bounds and the edge functions in
+    /// integers, stepped from pixel to pixel, exactly (a pixel centre on an edge is
+    /// inside); the depth is the plane's, as in the general case.
+    fn small_triangle(&mut self, v: [[f32; 3]; 3], c: Ink) -> bool {
+        // t * SUB rounded to an integer without a conversion's range checks: below
+        // 2^22, the sum with 1.5 * 2^23 holds it in its low mantissa bits
+        const MAGIC: f32 = 12_582_912.0;
+        const MAGIC_BITS: i64 = 0x4B40_0000;
+        let fixed = |t: f32| i64::from((t * SUB as f32 + MAGIC).to_bits()) - MAGIC_BITS;
         let [[x0, y0, _], [x1, y1, _], [x2, y2, _]] = v;
         let (fx, fy) = ([x0, x1, x2].map(fixed), [y0, y1, y2].map(fixed));
+        // the pixels whose centre (p * SUB + SUB / 2) is within the bounds
+        let first = |lo: i64| (lo - SUB / 2 + SUB - 1).div_euclid(SUB).max(0);
+        let last = |hi: i64, n: usize| (hi - SUB / 2).div_euclid(SUB).min(n as i64 - 1);
+        let min3 = |a: [i64; 3]| a[0].min(a[1]).min(a[2]);
+        let max3 = |a: [i64; 3]| a[0].max(a[1]).max(a[2]);
+        let (px0, px1) = (first(min3(fx)), last(max3(fx), self.w));
+        let (py0, py1) = (first(min3(fy)), last(max3(fy), self.h));
+        if px0 > px1 || py0 > py1 {
+            return true; // no pixel centre inside
+        }
+        if px1 - px0 >= SMALL as i64 || py1 - py0 >= SMALL as i64 {
+            return false;
+        }
+        let (px0, px1, py0, py1) = (px0 as usize, px1 as usize, py0 as usize, py1 as usize);
         let orient = (fx[1] - fx[0]) * (fy[2] - fy[0]) - (fx[2] - fx[0]) * (fy[1] - fy[0]);
-        if orient == 0 {
-            return; // degenerate once snapped
+        let area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0);
+        if orient == 0 || !area.is_finite() || area.abs() <= 1e-12 {
+            return true; // degenerate (once snapped, or as given)
         }
         // the edge function of edge a -> b at p, times the orientation's sign: at
         // least 0 on the inner side; its steps per pixel in x and y
@@ -188,7 +203,7 @@ impl Panel {
         let (e1, sx1, sy1) = edge(2, 0);
         let (e2, sx2, sy2) = edge(0, 1);
         // depth, affine in the pixel centre (in f32, from the unsnapped corners)
-        let (zx, zy, zc) = (plane.zx, plane.zy, plane.zc);
+        let Plane { zx, zy, zc, .. } = Plane::new(v, area);
         let (mut r0, mut r1, mut r2) = (e0, e1, e2);
         let n = px1 - px0 + 1;
         for py in py0..py1 + 1 {
@@ -216,6 +231,7 @@ impl Panel {
             r1 += sy1;
             r2 += sy2;
         }
+        true
     }
 
     /// A line `width` pixels wide (across its main direction) from `a` to `b`
@@ -354,13 +370,15 @@ impl Plane {
 }
 
 /// Triangles whose pixel bounds are under this many pixels each way are drawn in
-/// fixed point ([`Panel::small_triangle`]).
+/// fixed point ([`Panel::small_triangle`]), larger ones row by row in f32.
 const SMALL: usize = 16;
 /// Sub-pixel steps of the fixed point.
 const SUB: i64 = 256;
 /// Corners farther than this from the panel's origin (pixels) take the general path
-/// (the fixed-point products stay far inside i64: 2^16 * 2^8 squared is 2^48).
-const FIXED_MAX: f32 = 65536.0;
+/// (a corner times [`SUB`] stays below 2^22, as the rounding in
+/// [`Panel::small_triangle`] needs; the products of the edge functions, below 2^46,
+/// far inside i64).
+const FIXED_MAX: f32 = 8192.0;
 
 /// The smallest index `i >= 0` with `i as f32 >= v` (0 for NaN).
 #[inline]
