@@ -82,17 +82,9 @@ impl Panel {
         if !area.is_finite() || area.abs() <= 1e-12 {
             return; // edge-on, or not finite
         }
-        let Plane {
-            a0,
-            b0,
-            a1,
-            b1,
-            c0,
-            c1,
-            zx,
-            zy,
-            zc,
-        } = Plane::new(v, area);
+        let p = Plane::new(v, area);
+        let (a0, b0, a1, b1, c0, c1) = (p.a0, p.b0, p.a1, p.b1, p.c0, p.c1);
+        let (zx, zy, zc) = (p.zx, p.zy, p.zc);
         // l2 = 1 - l0 - l1, as an affine function of x on a row; the weights' zeros
         // on a row are at -r / a (a weight nearly constant along the row: none).
         // Only a triangle a few pixels wide or more looks for its span on each row.
