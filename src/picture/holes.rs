@@ -278,10 +278,12 @@ pub(super) fn neighbourhoods(
 
 /// The rings of the boundary loops of the faces `faces` ([`soup_loops`]).
 pub(super) fn loop_rings(pos: &[DVec3], faces: &[[u32; 3]]) -> Vec<Ring> {
-    soup_loops(faces, pos.len())
-        .iter()
-        .filter_map(|l| Ring::new(pos, l))
-        .collect()
+    rings(pos, &soup_loops(faces, pos.len()))
+}
+
+/// The rings of the loops `loops` (a loop without a finite point left out).
+pub(super) fn rings(pos: &[DVec3], loops: &[Vec<u32>]) -> Vec<Ring> {
+    loops.iter().filter_map(|l| Ring::new(pos, l)).collect()
 }
 
 /// The boundary loops of a triangle soup as the repair finds its holes, before it

@@ -48,6 +48,16 @@ pub(super) enum Material {
 }
 
 impl Material {
+    /// A patch's, in its hole's status; else the input's front or back.
+    #[inline]
+    pub fn of(patch: Option<HoleStatus>, front: bool) -> Material {
+        match patch {
+            Some(s) => Material::Patch(s),
+            None if front => Material::Front,
+            None => Material::Back,
+        }
+    }
+
     fn index(self) -> usize {
         match self {
             Material::Front => 0,

@@ -78,7 +78,7 @@ impl Panel {
         if px0 > px1 || py0 > py1 {
             return;
         }
-        let area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0);
+        let area = twice_area(v);
         if !area.is_finite() || area.abs() <= 1e-12 {
             return; // edge-on, or not finite
         }
@@ -178,7 +178,7 @@ impl Panel {
         }
         let (px0, px1, py0, py1) = (px0 as usize, px1 as usize, py0 as usize, py1 as usize);
         let orient = (fx[1] - fx[0]) * (fy[2] - fy[0]) - (fx[2] - fx[0]) * (fy[1] - fy[0]);
-        let area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0);
+        let area = twice_area(v);
         if orient == 0 || !area.is_finite() || area.abs() <= 1e-12 {
             return true; // degenerate (once snapped, or as given)
         }
@@ -318,6 +318,12 @@ impl Panel {
     pub fn at(&self, x: usize, y: usize) -> Ink {
         self.px[y * self.w + x]
     }
+}
+
+/// Twice the signed area of the screen triangle `v` (its depths aside).
+#[inline]
+fn twice_area([[x0, y0, _], [x1, y1, _], [x2, y2, _]]: [[f32; 3]; 3]) -> f32 {
+    (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
 }
 
 /// The barycentric weights `l0`, `l1` of a triangle's corners 0 and 1 and its depth,

@@ -5,6 +5,8 @@
 //! where the repair kept the input's faces and vertex numbers, the picture is the one
 //! [`super::render`] draws, to the bit.
 
+#[cfg(test)]
+use super::holes::rings;
 use super::holes::{loop_rings, neighbourhoods, Ring};
 use super::panels::{before_tile, closeup_camera, overview_surface};
 use super::raster::Panel;
@@ -56,27 +58,23 @@ impl Sketch {
     /// largest loops for their close-ups (the repair decides which holes get one: the
     /// failed ones first; the largest are those in the common case).
     pub fn new(input: &RawMesh, opts: &Options) -> Sketch {
-        let (pos, faces) = (&input.positions, &input.faces);
-        let rings = loop_rings(pos, faces);
-        let view = View::of(pos, faces, overview_stride(faces.len(), opts), &rings);
-        Sketch::with(input, &rings, view, opts)
+        Sketch::with(input, &loop_rings(&input.positions, &input.faces), opts)
     }
 
     /// [`Sketch::new`] taking `loops` for the input's boundary loops (the overview
     /// looks at them, the close-ups are theirs).
     #[cfg(test)]
     pub(super) fn from_loops(input: &RawMesh, loops: &[Vec<u32>], opts: &Options) -> Sketch {
-        let (pos, faces) = (&input.positions, &input.faces);
-        let rings: Vec<Ring> = loops.iter().filter_map(|l| Ring::new(pos, l)).collect();
-        let view = View::of(pos, faces, overview_stride(faces.len(), opts), &rings);
-        Sketch::with(input, &rings, view, opts)
+        Sketch::with(input, &rings(&input.positions, loops), opts)
     }
 
-    fn with(input: &RawMesh, rings: &[Ring], view: View, opts: &Options) -> Sketch {
+    /// The sketch of `input` whose boundary loops are `rings`.
+    fn with(input: &RawMesh, rings: &[Ring], opts: &Options) -> Sketch {
         let width = opts.width.max(320);
         let (over_h, tile) = (width * 5 / 8, width / 4);
         let (pos, faces) = (&input.positions, &input.faces);
         let stride = overview_stride(faces.len(), opts);
+        let view = View::of(pos, faces, stride, rings);
         let View { lo, hi, dir } = view;
         let mut sketch = Sketch {
             width,

@@ -102,12 +102,7 @@ pub(super) fn corners(pos: &[DVec3], f: [u32; 3]) -> Option<[DVec3; 3]> {
 #[inline]
 fn shade(cam: &Camera, [a, b, c]: [DVec3; 3], patch: Option<HoleStatus>) -> Ink {
     let n = (b - a).cross(c - a).normalize_or_zero();
-    let material = match patch {
-        Some(s) => Material::Patch(s),
-        None if n.dot(cam.fwd) <= 0.0 => Material::Front,
-        None => Material::Back,
-    };
-    material.shade(n.dot(cam.light).abs() as f32)
+    Material::of(patch, n.dot(cam.fwd) <= 0.0).shade(n.dot(cam.light).abs() as f32)
 }
 
 /// [`shade`] from a face's projected corners: the camera frame's coordinates are
@@ -125,12 +120,7 @@ pub(super) fn shade_projected(
     let e2 = glam::Vec3::new((c[0] - a[0]) * inv, (a[1] - c[1]) * inv, c[2] - a[2]);
     // the world normal in camera coordinates
     let n = -e1.cross(e2).normalize_or_zero();
-    let material = match patch {
-        Some(s) => Material::Patch(s),
-        None if n.z <= 0.0 => Material::Front,
-        None => Material::Back,
-    };
-    material.shade(n.dot(cam.light_cam).abs())
+    Material::of(patch, n.z <= 0.0).shade(n.dot(cam.light_cam).abs())
 }
 
 /// Draws one face, flat-shaded: `patch` is its hole's status when it belongs to a
