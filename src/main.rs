@@ -119,6 +119,11 @@ struct FillArgs {
     /// coloured by status, and each hole before and after.
     #[arg(long)]
     picture: Option<PathBuf>,
+    /// With --picture and --report (the daemon's children): write the model and the
+    /// log first, say so on standard output (`written CODE`), then draw the picture at
+    /// the lowest CPU priority, so that a repair's publication never waits for it.
+    #[arg(long, hide = true, requires_all = ["picture", "report"])]
+    picture_after_log: bool,
 }
 
 fn main() -> ExitCode {
@@ -363,24 +368,66 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
         (report.timings.smooth_ms + report.timings.fill_ms) / 1000.0
     );
 
+    let code = if report.summary.failed > 0 {
+        exit::HOLES_FAILED
+    } else {
+        exit::OK
+    };
+    let sketch_ms = sketch
+        .as_ref()
+        .map_or(0.0, |(_, took)| took.as_secs_f64() * 1000.0);
+    let picture = |report: &holefill::report::RepairReport| {
+        let t = Instant::now();
+        let (picture, sketched) = match sketch {
+            Some((sketch, took)) => (sketch.finish(&raw, &out, report, &picture_opts), took),
+            None => (
+                holefill::picture::render(&out, report, &picture_opts),
+                Duration::ZERO,
+            ),
+        };
+        (picture.to_png(), sketched + t.elapsed())
+    };
+
+    if let (Some(path), true) = (&args.picture, args.picture_after_log) {
+        // the daemon's child: the model and the log first, then the picture at the
+        // lowest priority (the log's picture_ms is what the sketch took during the repair)
+        let t = Instant::now();
+        holefill::write(&args.output, &out, Some(out_format)).map_err(io_failure)?;
+        report.timings.write_ms = t.elapsed().as_secs_f64() * 1000.0;
+        report.timings.picture_ms = sketch_ms;
+        if let Some(log) = &args.report {
+            write_report(log, &report.to_json())?;
+        }
+        announce_written(code);
+        lowest_priority();
+        #[cfg(feature = "test-hooks")]
+        if let Some(ms) = std::env::var(daemon::hooks::PICTURE_SLEEP_MS)
+            .ok()
+            .and_then(|v| v.parse().ok())
+        {
+            std::thread::sleep(Duration::from_millis(ms));
+        }
+        let drawn = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| picture(&report)));
+        match drawn {
+            Ok((Ok(png), _)) => holefill::io::write_atomic(path, &png).map_err(io_failure)?,
+            Ok((Err(e), _)) => eprintln!("warning: {}: {e}", path.display()),
+            Err(_) => eprintln!(
+                "warning: {}: internal error while drawing the picture; none written",
+                path.display()
+            ),
+        }
+        return Ok(code);
+    }
+
     // The picture is finished on its own thread while the model is written, and its
     // file written and synced beside the model's; it is put in place after the model,
     // so that a picture never stands beside a lost model.
     let (written, write_ms, drawn) = std::thread::scope(|s| {
         let drawing = args.picture.as_ref().map(|path| {
-            s.spawn(|| {
-                let t = Instant::now();
-                let (picture, sketched) = match sketch {
-                    Some((sketch, took)) => {
-                        (sketch.finish(&raw, &out, &report, &picture_opts), took)
-                    }
-                    None => (
-                        holefill::picture::render(&out, &report, &picture_opts),
-                        Duration::ZERO,
-                    ),
-                };
-                let staged = picture.to_png().map(|png| holefill::io::stage(path, &png));
-                (staged, sketched + t.elapsed())
+            let report = &report;
+            s.spawn(move || {
+                let (png, took) = picture(report);
+                (png.map(|png| holefill::io::stage(path, &png)), took)
             })
         });
         let t = Instant::now();
@@ -417,11 +464,36 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
     if let Some(path) = &args.report {
         write_report(path, &report.to_json())?;
     }
-    Ok(if report.summary.failed > 0 {
-        exit::HOLES_FAILED
-    } else {
-        exit::OK
-    })
+    Ok(code)
+}
+
+/// Tells the daemon that the model and the log are written and what the exit status
+/// will be (`--picture-after-log`): one line on standard output.
+fn announce_written(code: u8) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    let _ = writeln!(out, "written {code}");
+    let _ = out.flush();
+}
+
+/// Lowers every thread of this process to the lowest CPU priority (nice 19), so that
+/// what is left to do (the picture) takes only the time other work leaves. On Linux
+/// a priority is a thread's; the threads started later inherit it from this one.
+fn lowest_priority() {
+    use rustix::process::{setpriority_process, Pid};
+    if let Ok(tasks) = std::fs::read_dir("/proc/self/task") {
+        for t in tasks.flatten() {
+            let tid = t
+                .file_name()
+                .to_str()
+                .and_then(|n| n.parse::<i32>().ok())
+                .and_then(Pid::from_raw);
+            if let Some(tid) = tid {
+                let _ = setpriority_process(Some(tid), 19);
+            }
+        }
+    }
+    let _ = setpriority_process(None, 19);
 }
 
 fn write_report(path: &Path, json: &str) -> Result<(), Failure> {

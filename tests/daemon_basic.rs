@@ -388,9 +388,13 @@ fn collision_overwrite_replaces_the_earlier_output_when_asked() {
         "{}",
         d.log()
     );
-    assert_eq!(
+    // the picture follows its log
+    assert!(
+        wait_until(LONG, || Folders::files(&f.outbox)
+            == vec!["scan.obj", "scan.obj.repair.json", "scan.obj.repair.png"]),
+        "{:?}\n{}",
         Folders::files(&f.outbox),
-        vec!["scan.obj", "scan.obj.repair.json", "scan.obj.repair.png"]
+        d.log()
     );
     assert_ne!(
         fs::read_to_string(f.outbox.join("scan.obj")).unwrap(),

@@ -35,9 +35,13 @@ fn kill9_during_processing_then_restart_repairs_the_file_once() {
     // the orphaned worker of the dead daemon had 3 s to go: give it the time to (fail to) write
     std::thread::sleep(Duration::from_secs(4));
     assert_eq!(f.models(), vec!["k.obj"], "repaired once");
-    assert_eq!(
-        Folders::files(&f.outbox),
-        vec!["k.obj", "k.obj.repair.json", "k.obj.repair.png"]
+    assert!(
+        wait_files(
+            &f.outbox,
+            &["k.obj", "k.obj.repair.json", "k.obj.repair.png"]
+        ),
+        "{:?}",
+        Folders::files(&f.outbox)
     );
     let log = Folders::log(&f.outbox, "k.obj");
     assert_eq!(log["status"], "repaired");
@@ -237,9 +241,11 @@ fn a_daemon_killed_after_publishing_is_not_repaired_twice() {
         "{}",
         d.log()
     );
-    assert_eq!(
-        Folders::files(&f.outbox),
-        vec!["x.obj", "x.obj.repair.json", "x.obj.repair.png"],
+    assert!(
+        wait_files(
+            &f.outbox,
+            &["x.obj", "x.obj.repair.json", "x.obj.repair.png"]
+        ),
         "no second repair"
     );
     assert_eq!(Folders::files(&f.archive), vec!["x.obj"]);
@@ -259,9 +265,11 @@ fn a_daemon_killed_between_archive_and_log_finishes_cleanly() {
         "{}",
         d.log()
     );
-    assert_eq!(
-        Folders::files(&f.outbox),
-        vec!["x.obj", "x.obj.repair.json", "x.obj.repair.png"],
+    assert!(
+        wait_files(
+            &f.outbox,
+            &["x.obj", "x.obj.repair.json", "x.obj.repair.png"]
+        ),
         "{}",
         d.log()
     );

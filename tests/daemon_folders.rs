@@ -308,9 +308,11 @@ fn an_archive_that_cannot_be_written_is_never_claimed_archived_nor_repaired_twic
         "{}",
         d.log()
     );
-    assert_eq!(
-        Folders::files(&f.outbox),
-        vec!["x.obj", "x.obj.repair.json", "x.obj.repair.png"],
+    assert!(
+        wait_files(
+            &f.outbox,
+            &["x.obj", "x.obj.repair.json", "x.obj.repair.png"]
+        ),
         "{}",
         d.log()
     );
@@ -356,9 +358,13 @@ fn an_immutable_archive_recovers_without_a_restart() {
         "{}",
         d.log()
     );
-    assert_eq!(
-        Folders::files(&f.outbox),
-        vec!["y.obj", "y.obj.repair.json", "y.obj.repair.png"]
+    assert!(
+        wait_files(
+            &f.outbox,
+            &["y.obj", "y.obj.repair.json", "y.obj.repair.png"]
+        ),
+        "{:?}",
+        Folders::files(&f.outbox)
     );
     assert_eq!(Folders::files(&f.archive), vec!["y.obj"]);
     d.signal("TERM");

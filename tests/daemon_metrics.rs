@@ -63,7 +63,13 @@ fn every_counter_matches_a_run_of_20_files_with_2_failing() {
     assert!(done, "{}", d.log());
     assert!(seen_busy, "a scrape during the run saw a file in flight");
 
-    let t = scrape(port);
+    // the gauges are set once the daemon's loop has handled the last end
+    let mut t = String::new();
+    let settled = wait_until(Duration::from_secs(10), || {
+        t = scrape(port);
+        must(&t, "holefill_files_waiting") == 0.0 && must(&t, "holefill_files_in_flight") == 0.0
+    });
+    assert!(settled, "{t}");
     assert_eq!(
         must(&t, "holefill_files_total{outcome=\"repaired\"}"),
         18.0,
@@ -111,18 +117,23 @@ fn every_counter_matches_a_run_of_20_files_with_2_failing() {
     assert!(!want.is_empty());
     assert_eq!(family(&t, "holefill_holes_total"), want);
 
-    // a picture beside every repaired file's log
+    // a picture beside every repaired file's log (it follows the log)
     for n in &names {
         let p = f.outbox.join(format!("{n}.repair.png"));
+        assert!(
+            wait_until(Duration::from_secs(30), || p.is_file()),
+            "{}",
+            p.display()
+        );
         let b = fs::read(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
         assert_eq!(&b[..8], b"\x89PNG\r\n\x1a\n");
     }
     assert!(!f.failed.join("bad.obj.repair.png").exists());
 
-    // the index lists every file of the run
+    // the index lists every file of the run, with the pictures drawn after the logs
     let listed = wait_until(Duration::from_secs(10), || {
         let page = fs::read_to_string(f.outbox.join("index.html")).unwrap_or_default();
-        page.contains("20 files")
+        page.contains("20 files") && page.matches("<img src=").count() == 18
     });
     let page = fs::read_to_string(f.outbox.join("index.html")).unwrap_or_default();
     assert!(listed, "{page}");
@@ -209,4 +220,68 @@ fn a_metrics_port_in_use_refuses_the_start() {
     let st = d.wait_exit(Duration::from_secs(20)).expect("it exits");
     assert_eq!(st.code(), Some(78), "{}", d.log());
     assert!(d.log().contains("cannot serve the metrics"), "{}", d.log());
+}
+
+#[test]
+fn a_repair_is_published_without_waiting_for_its_picture() {
+    let f = Folders::new();
+    // one worker; the picture of `a` takes 2 s more, after its model and log are written
+    let mut d = Daemon::ready(
+        &f,
+        &["--workers", "1"],
+        &[("HOLEFILL_TEST_SLOW_PICTURE", "a.obj:2000")],
+    );
+    let (obj, _) = mesh();
+    drop_renamed(&f.inbox, "a.obj", &obj);
+    assert!(
+        wait_until(LONG, || f.outbox.join("a.obj.repair.json").is_file()),
+        "{}",
+        d.log()
+    );
+    drop_renamed(&f.inbox, "b.obj", &obj);
+    // b is repaired and published while a's picture is still being drawn
+    assert!(
+        wait_until(LONG, || f.outbox.join("b.obj.repair.json").is_file()),
+        "{}",
+        d.log()
+    );
+    assert!(
+        !f.outbox.join("a.obj.repair.png").exists(),
+        "a's picture came first\n{}",
+        d.log()
+    );
+    assert_eq!(f.models(), vec!["a.obj", "b.obj"]);
+    assert!(wait_files(
+        &f.outbox,
+        &[
+            "a.obj",
+            "a.obj.repair.json",
+            "a.obj.repair.png",
+            "b.obj",
+            "b.obj.repair.json",
+            "b.obj.repair.png"
+        ]
+    ));
+    // the index shows both pictures once they are there
+    let shown = wait_until(Duration::from_secs(10), || {
+        let page = fs::read_to_string(f.outbox.join("index.html")).unwrap_or_default();
+        page.matches("<img src=").count() == 2
+    });
+    assert!(shown, "{}", d.log());
+    // a stop waits for a picture being drawn
+    drop_renamed(&f.inbox, "a2.obj", &obj);
+    assert!(wait_until(LONG, || f
+        .outbox
+        .join("a2.obj.repair.json")
+        .is_file()));
+    d.signal("TERM");
+    assert_eq!(d.wait_exit(LONG).and_then(|s| s.code()), Some(0));
+    assert!(f.outbox.join("a2.obj.repair.png").is_file(), "{}", d.log());
+    assert!(
+        !f.outbox.join(".holefill-tmp").exists()
+            || fs::read_dir(f.outbox.join(".holefill-tmp"))
+                .map(|mut r| r.next().is_none())
+                .unwrap_or(true),
+        "temporary files left"
+    );
 }

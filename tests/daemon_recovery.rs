@@ -36,9 +36,11 @@ fn kill_at_then_restart(f: &Folders, point: &str) {
         d.log(),
         d2.log()
     );
-    assert_eq!(
-        Folders::files(&f.outbox),
-        vec!["x.obj", "x.obj.repair.json", "x.obj.repair.png"],
+    assert!(
+        wait_files(
+            &f.outbox,
+            &["x.obj", "x.obj.repair.json", "x.obj.repair.png"]
+        ),
         "{point}\n{}",
         d2.log()
     );

@@ -198,3 +198,55 @@ fn the_bunny_scans_picture_shows_its_holes() {
     assert_eq!((w, h), (512, 20 + 320 + closeups.div_ceil(2) * (14 + 128)));
     assert!(count(&rgb, filled()) > 200 * filled_n.min(8));
 }
+
+/// The daemon's children (`--picture-after-log`) write the model and the log, say so
+/// on standard output, and only then draw the picture (at the lowest priority).
+#[test]
+fn the_picture_after_the_log_is_announced_once_model_and_log_are_written() {
+    use std::io::BufRead;
+    let dir = tempdir();
+    let input = dir.path().join("scan.obj");
+    fs::write(&input, two_holes()).unwrap();
+    let (out, pic, log) = (
+        dir.path().join("out.obj"),
+        dir.path().join("scan.repair.png"),
+        dir.path().join("scan.repair.json"),
+    );
+    let mut child = std::process::Command::new(common::bin())
+        .args(["fill", "--quiet", "--picture-after-log", "--picture"])
+        .args([&pic, &input, &out, Path::new("--report"), &log])
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .expect("run holefill");
+    let stdout = std::io::BufReader::new(child.stdout.take().expect("stdout"));
+    let mut announced = false;
+    for line in stdout.lines() {
+        let line = line.expect("a line");
+        if line == "written 0" {
+            announced = true;
+            // what the daemon publishes at once is complete
+            let v: serde_json::Value =
+                serde_json::from_slice(&fs::read(&log).expect("the log")).expect("JSON");
+            assert_eq!(v["summary"]["filled"], 2, "{v}");
+            assert!(fs::read_to_string(&out).is_ok_and(|t| t.contains("\nf ")));
+        }
+    }
+    assert!(announced, "no `written 0` line");
+    assert_eq!(child.wait().expect("exit").code(), Some(0));
+    let (w, h, rgb) = decode(&pic);
+    assert!(w >= 320 && h > 0 && count(&rgb, filled()) > 0);
+
+    // the flag needs a picture and a log
+    let o = run(&[
+        "fill",
+        "--picture-after-log",
+        input.to_str().unwrap(),
+        "x.obj",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        o.status.code() != Some(0) && err.contains("--picture"),
+        "{err}"
+    );
+    assert!(!Path::new("x.obj").exists());
+}

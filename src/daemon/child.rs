@@ -18,8 +18,8 @@ use std::io;
 use std::path::{Path, PathBuf};
 use std::process::Stdio;
 use std::time::Duration;
-use tokio::io::AsyncReadExt;
-use tokio::sync::watch;
+use tokio::io::{AsyncBufReadExt, AsyncReadExt, BufReader};
+use tokio::sync::{oneshot, watch};
 
 /// How children are started: the executable, the policy and the limits.
 #[derive(Clone, Copy, Debug)]
@@ -79,7 +79,9 @@ pub enum ChildEnd {
 /// Runs `holefill fill INPUT OUT --input-format EXT --report LOG` under the limits of
 /// `spec`; `name` (the file's name) selects the test hooks. Ends early, killing the
 /// child's process group, on the time limit or when `cancel` turns true. Returns how
-/// it ended and the tail of its standard error.
+/// it ended and the tail of its standard error; with a picture to draw, as soon as the
+/// child says its model and log are written: then its exit status is the one it
+/// announced, and the [`Drawing`] is the child drawing the picture.
 pub async fn run(
     spec: &Spec<'_>,
     name: &str,
@@ -88,11 +90,11 @@ pub async fn run(
     out: &Path,
     log: &Path,
     cancel: &mut watch::Receiver<bool>,
-) -> (ChildEnd, Vec<u8>) {
+) -> (ChildEnd, Vec<u8>, Option<Drawing>) {
     let (stdin, input_path): (Stdio, &Path) = match input {
         Input::Stdin(f) => match f.try_clone() {
             Ok(f) => (Stdio::from(f), Path::new("/proc/self/fd/0")),
-            Err(e) => return (ChildEnd::SpawnError(e), Vec::new()),
+            Err(e) => return (ChildEnd::SpawnError(e), Vec::new(), None),
         },
         Input::Path(p) => (Stdio::null(), p),
     };
@@ -109,8 +111,10 @@ pub async fn run(
     if let Some(p) = spec.policy {
         cmd.arg("--policy").arg(p);
     }
+    // the picture is drawn after the child announces its model and log written
+    let deferred = spec.picture.is_some();
     if let Some(p) = spec.picture {
-        cmd.arg("--picture").arg(p);
+        cmd.arg("--picture").arg(p).arg("--picture-after-log");
     }
     // the files a mesh names are read from its set's members only (never beside
     // /proc/self/fd/0)
@@ -132,12 +136,18 @@ pub async fn run(
         }
     }
     cmd.stdin(stdin)
-        .stdout(Stdio::null())
+        .stdout(if deferred {
+            Stdio::piped()
+        } else {
+            Stdio::null()
+        })
         .stderr(Stdio::piped())
         .env_remove("NOTIFY_SOCKET")
         .env_remove("WATCHDOG_USEC")
         .env_remove("WATCHDOG_PID")
         .env_remove("HOLEFILL_TEST_SLOW")
+        .env_remove("HOLEFILL_TEST_SLOW_PICTURE")
+        .env_remove(super::hooks::PICTURE_SLEEP_MS)
         .env_remove("HOLEFILL_TEST_CRASH_ON")
         .env_remove("HOLEFILL_TEST_DIE_AT")
         .env_remove("HOLEFILL_TEST_PAUSE_AT")
@@ -145,7 +155,7 @@ pub async fn run(
         .kill_on_drop(true);
     let mut child = match cmd.spawn() {
         Ok(c) => c,
-        Err(e) => return (ChildEnd::SpawnError(e), Vec::new()),
+        Err(e) => return (ChildEnd::SpawnError(e), Vec::new(), None),
     };
     if let Some(m) = crate::metrics::global() {
         m.attempts.inc();
@@ -170,10 +180,60 @@ pub async fn run(
             tail
         })
     });
+    // `written CODE` on stdout: the model and the log are written, the picture follows
+    let announced = child.stdout.take().map(|out| {
+        let (tx, rx) = oneshot::channel();
+        tokio::spawn(async move {
+            let mut lines = BufReader::new(out).lines();
+            let mut tx = Some(tx);
+            while let Ok(Some(line)) = lines.next_line().await {
+                let code = line.strip_prefix("written ").and_then(|c| c.parse().ok());
+                if let Some(code) = code {
+                    if let Some(tx) = tx.take() {
+                        let _ = tx.send(code);
+                    }
+                }
+            }
+        });
+        rx
+    });
     let limit = spec.time_limit;
+    let deadline = limit.map(|d| tokio::time::Instant::now() + d);
+    let written = async {
+        match announced {
+            Some(rx) => match rx.await {
+                Ok(code) => code,
+                // no announcement: the exit decides
+                Err(_) => std::future::pending().await,
+            },
+            None => std::future::pending().await,
+        }
+    };
+    let end = tokio::select! {
+        end = wait_until(&mut child, deadline, limit, cancel) => end,
+        code = written => {
+            let drawing = Drawing { child, pid, reader, deadline, limit, code };
+            return (ChildEnd::Exit(code), Vec::new(), Some(drawing));
+        }
+    };
+    if matches!(end, ChildEnd::Timeout(_) | ChildEnd::Cancelled) {
+        kill_group(pid);
+        let _ = child.kill().await;
+    }
+    (end, tail_of(reader).await, None)
+}
+
+/// Waits for the child's exit until `deadline` or until `cancel` turns true (then
+/// `Timeout` or `Cancelled`, the child still running).
+async fn wait_until(
+    child: &mut tokio::process::Child,
+    deadline: Option<tokio::time::Instant>,
+    limit: Option<Duration>,
+    cancel: &mut watch::Receiver<bool>,
+) -> ChildEnd {
     let sleep = async {
-        match limit {
-            Some(d) => tokio::time::sleep(d).await,
+        match deadline {
+            Some(t) => tokio::time::sleep_until(t).await,
             None => std::future::pending().await,
         }
     };
@@ -187,7 +247,7 @@ pub async fn run(
             }
         }
     };
-    let end = tokio::select! {
+    tokio::select! {
         st = child.wait() => match st {
             Ok(st) => {
                 use std::os::unix::process::ExitStatusExt;
@@ -201,19 +261,56 @@ pub async fn run(
         },
         _ = sleep => ChildEnd::Timeout(limit.unwrap_or_default()),
         _ = cancelled => ChildEnd::Cancelled,
-    };
-    if matches!(end, ChildEnd::Timeout(_) | ChildEnd::Cancelled) {
-        kill_group(pid);
-        let _ = child.kill().await;
     }
-    let tail = match reader {
+}
+
+/// The tail of the child's stderr once it is closed (at most 2 s after the exit).
+async fn tail_of(reader: Option<tokio::task::JoinHandle<Vec<u8>>>) -> Vec<u8> {
+    match reader {
         Some(h) => match tokio::time::timeout(Duration::from_secs(2), h).await {
             Ok(Ok(t)) => t,
             _ => Vec::new(),
         },
         None => Vec::new(),
-    };
-    (end, tail)
+    }
+}
+
+/// A child that wrote its model and log and now draws its picture, at the lowest CPU
+/// priority, under what is left of its time limit. Dropped, it is killed.
+#[derive(Debug)]
+pub struct Drawing {
+    child: tokio::process::Child,
+    pid: Option<u32>,
+    reader: Option<tokio::task::JoinHandle<Vec<u8>>>,
+    deadline: Option<tokio::time::Instant>,
+    limit: Option<Duration>,
+    /// The exit status it announced.
+    code: i32,
+}
+
+impl Drawing {
+    /// Waits for the picture: `Ok` when the child exits with the status it announced,
+    /// else why not (killed at the time limit or when `cancel` turns true).
+    pub async fn finish(mut self, cancel: &mut watch::Receiver<bool>) -> Result<(), String> {
+        let end = wait_until(&mut self.child, self.deadline, self.limit, cancel).await;
+        if matches!(end, ChildEnd::Timeout(_) | ChildEnd::Cancelled) {
+            kill_group(self.pid);
+            let _ = self.child.kill().await;
+        }
+        let msg = stderr_message(&tail_of(self.reader.take()).await);
+        match end {
+            ChildEnd::Exit(c) if c == self.code && msg.is_empty() => Ok(()),
+            ChildEnd::Exit(c) if c == self.code => Err(msg),
+            ChildEnd::Cancelled => Err("the daemon is stopping".into()),
+            end => Err(crash_reason(0, end, &msg)),
+        }
+    }
+
+    /// Kills the child and waits for it to end (its picture is not wanted).
+    pub async fn abandon(mut self) {
+        kill_group(self.pid);
+        let _ = self.child.kill().await;
+    }
 }
 
 /// The shell script that applies the limits (and test hooks) and execs the child.

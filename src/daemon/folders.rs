@@ -239,6 +239,7 @@ impl Daemon {
     pub(super) fn release_adopted(&mut self) {
         let busy = |tag: &str, d: &Daemon| {
             d.working.values().any(|(t, _)| t == tag)
+                || d.drawing.values().any(|t| t == tag)
                 || d.again.iter().any(|(j, _)| j.home.tag == tag)
                 || d.sets.iter().any(|p| p.job.home.tag == tag)
         };

@@ -5,6 +5,8 @@
 //!
 //! - `HOLEFILL_TEST_SLOW=SUBSTR:MS`: the worker of every file whose name contains
 //!   SUBSTR sleeps MS milliseconds before the repair (an empty SUBSTR matches all);
+//! - `HOLEFILL_TEST_SLOW_PICTURE=SUBSTR:MS`: that worker sleeps MS milliseconds after
+//!   it wrote the model and the log, before it draws the picture;
 //! - `HOLEFILL_TEST_CRASH_ON=SUBSTR`: that worker kills itself with SIGKILL (as the
 //!   kernel's OOM killer would);
 //! - `HOLEFILL_TEST_DIE_AT=POINT[:SUBSTR]`: the daemon itself dies (SIGKILL) when the
@@ -13,6 +15,10 @@
 //!   POINT (to widen a race window on purpose).
 
 use std::ffi::OsStr;
+
+/// The child's variable for `HOLEFILL_TEST_SLOW_PICTURE` (read by `holefill fill`
+/// built with the feature).
+pub const PICTURE_SLEEP_MS: &str = "HOLEFILL_TEST_PICTURE_SLEEP_MS";
 
 /// The named steps a test can stop the daemon at.
 pub const POINTS: &[&str] = &[
@@ -44,6 +50,8 @@ pub struct Hooks {
     #[cfg(feature = "test-hooks")]
     slow: Option<(String, u64)>,
     #[cfg(feature = "test-hooks")]
+    slow_picture: Option<(String, u64)>,
+    #[cfg(feature = "test-hooks")]
     crash_on: Option<String>,
     #[cfg(feature = "test-hooks")]
     die_at: Option<(String, String)>,
@@ -51,8 +59,9 @@ pub struct Hooks {
     pause_at: Option<(String, u64, String)>,
 }
 
-const VARS: [&str; 4] = [
+const VARS: [&str; 5] = [
     "HOLEFILL_TEST_SLOW",
+    "HOLEFILL_TEST_SLOW_PICTURE",
     "HOLEFILL_TEST_CRASH_ON",
     "HOLEFILL_TEST_DIE_AT",
     "HOLEFILL_TEST_PAUSE_AT",
@@ -63,10 +72,12 @@ impl Hooks {
     #[cfg(feature = "test-hooks")]
     pub fn from_env() -> Hooks {
         let var = |k: &str| std::env::var(k).ok().filter(|s| !s.is_empty());
-        let slow = var("HOLEFILL_TEST_SLOW").and_then(|v| {
+        let sub_ms = |v: String| {
             let (s, ms) = v.rsplit_once(':')?;
             Some((s.to_string(), ms.parse().ok()?))
-        });
+        };
+        let slow = var("HOLEFILL_TEST_SLOW").and_then(sub_ms);
+        let slow_picture = var("HOLEFILL_TEST_SLOW_PICTURE").and_then(sub_ms);
         let die_at = var("HOLEFILL_TEST_DIE_AT").map(|v| match v.split_once(':') {
             Some((p, s)) => (p.to_string(), s.to_string()),
             None => (v, String::new()),
@@ -79,6 +90,7 @@ impl Hooks {
         });
         Hooks {
             slow,
+            slow_picture,
             crash_on: var("HOLEFILL_TEST_CRASH_ON"),
             die_at,
             pause_at,
@@ -120,6 +132,11 @@ impl Hooks {
             if let Some((sub, ms)) = &self.slow {
                 if name.contains(sub.as_str()) {
                     s.push_str(&format!("sleep {}.{:03}; ", ms / 1000, ms % 1000));
+                }
+            }
+            if let Some((sub, ms)) = &self.slow_picture {
+                if name.contains(sub.as_str()) {
+                    s.push_str(&format!("export {PICTURE_SLEEP_MS}={ms}; "));
                 }
             }
             if let Some(sub) = &self.crash_on {

@@ -391,6 +391,14 @@ impl Index {
         self.dirty = true;
     }
 
+    /// The picture of the entry of the log at `log`, published after its log.
+    pub fn picture(&mut self, log: &Path, picture: PathBuf) {
+        if let Some(e) = self.entries.iter_mut().find(|e| e.log == log) {
+            e.picture = Some(picture);
+            self.dirty = true;
+        }
+    }
+
     /// Writes the page when it changed and the last write is old enough (`force`: at
     /// once, at shutdown).
     pub fn flush(&mut self, force: bool) {

@@ -6,7 +6,7 @@ use super::fsops::shown;
 use super::index;
 use super::queue::Seen;
 use super::worker::{self, Done};
-use super::{Daemon, Parked, ERROR_EVERY};
+use super::{Daemon, Drawn, Parked, ERROR_EVERY};
 use crate::metrics;
 use std::collections::HashMap;
 use std::ffi::OsStr;
@@ -14,16 +14,21 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 impl Daemon {
-    /// Claims ready files while fewer than `workers` repairs run.
+    /// Claims ready files while fewer than `workers` repairs run (and fewer than twice
+    /// as many pictures are being drawn: each holds its child's memory).
     pub(super) fn dispatch(&mut self) {
-        if self.working.len() >= self.settings.workers {
+        if self.working.len() >= self.settings.workers
+            || self.drawing.len() >= 2 * self.settings.workers
+        {
             return;
         }
         if !self.check_folders(false) {
             return;
         }
         self.advance_sets();
-        while self.working.len() < self.settings.workers {
+        while self.working.len() < self.settings.workers
+            && self.drawing.len() < 2 * self.settings.workers
+        {
             let now = Instant::now();
             if let Some(pos) = self.again.iter().position(|(_, t)| *t <= now) {
                 if let Some((job, _)) = self.again.remove(pos) {
@@ -98,15 +103,22 @@ impl Daemon {
                 failed,
                 secs,
                 resumed,
+                picture,
             } => {
                 self.repaired += 1;
                 self.retries.remove(&job.name);
-                self.file_done(
-                    &self.layout.outbox.join(format!("{output}.repair.json")),
-                    None,
-                    secs,
-                    job.rec.stamp.map(|s| s.size),
-                );
+                let log = self.layout.outbox.join(format!("{output}.repair.json"));
+                self.file_done(&log, None, secs, job.rec.stamp.map(|s| s.size));
+                if let Some(p) = picture {
+                    // its temporary folder stays until it is published
+                    let id = job.id.clone();
+                    self.drawing.insert(id.clone(), job.home.tag.clone());
+                    let (cancel, tx) = (self.cancel.subscribe(), self.drawn_tx.clone());
+                    tokio::spawn(async move {
+                        let picture = p.publish(cancel).await;
+                        let _ = tx.send(Drawn { id, log, picture });
+                    });
+                }
                 let name = job.shown();
                 let output = shown(OsStr::new(&output));
                 let how = if resumed {
@@ -249,6 +261,15 @@ impl Daemon {
                     self.put_back_waiting();
                 }
             }
+        }
+        self.release_adopted();
+    }
+
+    /// A repair's picture published (or lost): the index shows it.
+    pub(super) fn on_drawn(&mut self, d: Drawn) {
+        self.drawing.remove(&d.id);
+        if let (Some(ix), Some(p)) = (self.index.as_mut(), d.picture) {
+            ix.picture(&d.log, p);
         }
         self.release_adopted();
     }

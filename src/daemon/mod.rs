@@ -297,6 +297,10 @@ struct Daemon {
     cancel: tokio_watch::Sender<bool>,
     done_tx: mpsc::UnboundedSender<Done>,
     done_rx: mpsc::UnboundedReceiver<Done>,
+    /// Repairs whose pictures are still being drawn: id -> home tag.
+    drawing: HashMap<String, String>,
+    drawn_tx: mpsc::UnboundedSender<Drawn>,
+    drawn_rx: mpsc::UnboundedReceiver<Drawn>,
     events: Option<mpsc::Receiver<Ev>>,
     watcher: Option<Watcher>,
     rescan_flag: Arc<AtomicBool>,
@@ -312,6 +316,16 @@ struct Daemon {
     folders_ok: bool,
     /// `OUTBOX/index.html` (`None`: index_entries = 0).
     index: Option<index::Index>,
+}
+
+/// A repair's picture, drawn after its log was published: `picture` is where it was
+/// published (`None`: lost).
+#[derive(Debug)]
+struct Drawn {
+    /// The job's id.
+    id: String,
+    log: PathBuf,
+    picture: Option<PathBuf>,
 }
 
 impl Daemon {
@@ -377,6 +391,7 @@ impl Daemon {
         });
         let (cancel, _) = tokio_watch::channel(false);
         let (done_tx, done_rx) = mpsc::unbounded_channel();
+        let (drawn_tx, drawn_rx) = mpsc::unbounded_channel();
         let rescan_flag = Arc::new(AtomicBool::new(false));
 
         // the watcher first, then the scan: a file arriving in between is seen by one
@@ -413,6 +428,9 @@ impl Daemon {
             cancel,
             done_tx,
             done_rx,
+            drawing: HashMap::new(),
+            drawn_tx,
+            drawn_rx,
             events,
             watcher,
             rescan_flag,
@@ -454,9 +472,10 @@ impl Daemon {
 
     fn status(&self) -> String {
         format!(
-            "waiting {}, working {}, repaired {}, failed {}",
+            "waiting {}, working {}, drawing {}, repaired {}, failed {}",
             self.pending.len() + self.again.len() + self.sets.len(),
             self.working.len(),
+            self.drawing.len(),
             self.repaired,
             self.failed
         )
@@ -484,16 +503,17 @@ impl Daemon {
                 _ = sigint.recv() => self.begin_stop("SIGINT"),
                 _ = sighup.recv() => self.reload(),
                 Some(done) = self.done_rx.recv() => self.on_done(done),
+                Some(drawn) = self.drawn_rx.recv() => self.on_drawn(drawn),
                 Some(ev) = async { match events.as_mut() { Some(rx) => rx.recv().await, None => std::future::pending().await } } => self.on_event(ev),
                 _ = ticker.tick() => {}
             }
             let now = Instant::now();
             if let Some(deadline) = self.stopping {
-                if self.working.is_empty() {
+                if self.working.is_empty() && self.drawing.is_empty() {
                     break;
                 }
                 if now >= deadline && !self.cancelled {
-                    tracing::warn!("grace period over: killing {} running repairs; their files go back into the inbox", self.working.len());
+                    tracing::warn!("grace period over: killing {} running repairs (their files go back into the inbox) and {} pictures being drawn", self.working.len(), self.drawing.len());
                     self.cancelled = true;
                     let _ = self.cancel.send(true);
                 }

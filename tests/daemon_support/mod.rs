@@ -328,6 +328,12 @@ impl Drop for Mount {
 }
 
 /// Polls `cond` every 50 ms until true or `timeout`.
+/// Waits until the folder `dir` holds exactly the files `want` (as [`Folders::files`]
+/// lists them): a repair's picture follows its log.
+pub fn wait_files(dir: &Path, want: &[&str]) -> bool {
+    wait_until(Duration::from_secs(30), || Folders::files(dir) == want)
+}
+
 pub fn wait_until(timeout: Duration, mut cond: impl FnMut() -> bool) -> bool {
     let t = Instant::now();
     loop {

@@ -34,6 +34,13 @@
 //! repair. A step that cannot be done now (the archive not writable, a folder gone)
 //! leaves the job where it is and is retried later; the log, which says the original
 //! is archived, is published only once it is.
+//!
+//! **The picture follows the log.** The child writes the model and the log, says so
+//! (`fill --picture-after-log`), and draws the picture at the lowest CPU priority while
+//! the job is published and the next repair starts; [`LatePicture`] waits for it
+//! (under the same time limit) and puts it beside the log. A picture is best effort:
+//! one whose drawing fails, or whose child outlives a daemon that died, is lost with
+//! a warning, never the repair.
 
 use super::child::{self, ChildEnd};
 use super::claim::{self, Job, Layout, Phase};
@@ -111,6 +118,8 @@ pub enum Done {
         secs: f64,
         /// Finished from a record (a daemon died after the repair): not repaired again.
         resumed: bool,
+        /// The picture, still being drawn: published beside the log once it is.
+        picture: Option<Box<LatePicture>>,
     },
     /// In the failed folder with its log.
     Failed {
@@ -176,7 +185,10 @@ pub async fn process(ctx: Arc<RunCtx>, job: Job, mut cancel: watch::Receiver<boo
     match &job.rec.phase {
         Phase::Claimed => {}
         Phase::Repaired { .. } => {
-            return blocking(ctx, move |c| resume_repaired(&c, job, t, None, true)).await
+            let c = ctx.clone();
+            let done = blocking(ctx, move |c| resume_repaired(&c, job, t, None, true)).await;
+            // the picture, if the dead daemon's child drew it
+            return with_picture(&c, done, None);
         }
         Phase::Failed { .. } => {
             return blocking(ctx, move |c| finish_failed(&c, job, t, None)).await
@@ -198,7 +210,7 @@ pub async fn process(ctx: Arc<RunCtx>, job: Job, mut cancel: watch::Receiver<boo
     let _ = fs::remove_file(&child_log);
     let picture = job.tmp(PICTURE);
     let _ = fs::remove_file(&picture);
-    let (end, stderr) = match &ctx.forward {
+    let (end, stderr, drawing) = match &ctx.forward {
         // the gateway: repaired by a queue worker, its outcome written as the child's
         Some(f) => {
             let members: Vec<(String, PathBuf)> = job
@@ -207,15 +219,17 @@ pub async fn process(ctx: Arc<RunCtx>, job: Job, mut cancel: watch::Receiver<boo
                 .enumerate()
                 .map(|(i, m)| (m.name.clone(), job.member_path(i)))
                 .collect();
-            f.repair(
-                &job.name.to_string_lossy(),
-                &file,
-                &members,
-                &out,
-                &child_log,
-                &mut cancel,
-            )
-            .await
+            let (end, stderr) = f
+                .repair(
+                    &job.name.to_string_lossy(),
+                    &file,
+                    &members,
+                    &out,
+                    &child_log,
+                    &mut cancel,
+                )
+                .await;
+            (end, stderr, None)
         }
         None => {
             // glTF buffers of the set: read by the child from their claimed copies
@@ -249,6 +263,9 @@ pub async fn process(ctx: Arc<RunCtx>, job: Job, mut cancel: watch::Receiver<boo
     let changed = file.metadata().map(|m| Stamp::of(&m)).ok() != Some(stamp);
     drop(file);
     if changed && !matches!(end, ChildEnd::Cancelled) {
+        if let Some(d) = drawing {
+            d.abandon().await;
+        }
         let _ = fs::remove_file(&out);
         let _ = fs::remove_file(&child_log);
         return blocking(ctx, move |c| {
@@ -264,7 +281,21 @@ pub async fn process(ctx: Arc<RunCtx>, job: Job, mut cancel: watch::Receiver<boo
     let c2 = ctx.clone();
     match end {
         ChildEnd::Exit(code @ (0 | 2)) => {
-            blocking(c2, move |c| commit(&c, job, t, &out, &child_log, code)).await
+            let done = blocking(c2, move |c| commit(&c, job, t, &out, &child_log, code)).await;
+            match (&done, drawing) {
+                (Done::Repaired { .. }, d) | (_, d @ None) => with_picture(&ctx, done, d),
+                // published later: the picture waits with the model and the log
+                (Done::Later { .. }, Some(d)) => {
+                    let _ = d.finish(&mut cancel).await;
+                    done
+                }
+                // not published: the picture is not wanted
+                (_, Some(d)) => {
+                    d.abandon().await;
+                    let _ = fs::remove_file(&picture);
+                    done
+                }
+            }
         }
         ChildEnd::Exit(65) => {
             let e = or(msg, "unreadable or malformed input (exit 65)");
@@ -441,6 +472,83 @@ fn later(job: Job, error: String) -> Done {
 
 /// The worker's picture of the repair, in the job's temporary folder.
 const PICTURE: &str = ".png";
+
+/// A repaired job with its picture to publish when the daemon draws pictures (the
+/// child's, still being drawn, when `drawing` is given).
+fn with_picture(ctx: &RunCtx, mut done: Done, drawing: Option<child::Drawing>) -> Done {
+    if let Done::Repaired {
+        job,
+        output,
+        picture,
+        ..
+    } = &mut done
+    {
+        if ctx.settings.picture && ctx.forward.is_none() {
+            *picture = Some(Box::new(LatePicture {
+                drawing,
+                tmp: job.tmp(PICTURE),
+                dst: ctx.layout.outbox.join(format!("{output}.repair.png")),
+                rule: ctx.settings.collision,
+                shown: job.shown(),
+            }));
+        }
+    }
+    done
+}
+
+/// A repaired job's picture, drawn by its child after the model and the log were
+/// published (at the lowest CPU priority, so that it never delays a repair).
+#[derive(Debug)]
+pub struct LatePicture {
+    /// The child drawing it; `None`: it ended (the picture is there, or not at all).
+    drawing: Option<child::Drawing>,
+    /// Where the child writes it (the job's temporary folder).
+    tmp: PathBuf,
+    /// `OUTBOX/OUTPUT.repair.png`, beside the log.
+    dst: PathBuf,
+    rule: Collision,
+    shown: String,
+}
+
+impl LatePicture {
+    /// Waits for the picture and publishes it; its path, or `None` when it is lost
+    /// (the drawing failed or was killed, or the name is taken: said in a warning).
+    /// Its temporary file is removed in any case.
+    pub async fn publish(self: Box<Self>, mut cancel: watch::Receiver<bool>) -> Option<PathBuf> {
+        let LatePicture {
+            drawing,
+            tmp,
+            dst,
+            rule,
+            shown,
+        } = *self;
+        let waited = drawing.is_some();
+        let drawn = match drawing {
+            Some(d) => d.finish(&mut cancel).await,
+            None => Ok(()),
+        };
+        let published = tokio::task::spawn_blocking(move || {
+            let there = fs::symlink_metadata(&tmp).is_ok_and(|m| m.is_file());
+            let published = match (drawn, there) {
+                (Ok(()), true) => fsops::publish(&tmp, &dst, rule)
+                    .and_then(|()| fsops::fsync_dir(dst.parent().unwrap_or(Path::new("."))))
+                    .map_err(|e| format!("not published as {}: {e}", dst.display()))
+                    .map(|()| Some(dst)),
+                // a child that ended before it was waited for said why on its stderr
+                (Ok(()), false) if !waited => Ok(None),
+                (Ok(()), false) => Err("none drawn".to_string()),
+                (Err(e), _) => Err(e),
+            };
+            let _ = fs::remove_file(&tmp);
+            published.unwrap_or_else(|e| {
+                tracing::warn!(file = %shown, "{shown}: the picture of its repair is lost: {e}");
+                None
+            })
+        })
+        .await;
+        published.ok().flatten()
+    }
+}
 
 /// Puts the file back into the inbox (retry later, or settle again when `changed`).
 fn put_back(ctx: &RunCtx, job: Job, error: Option<String>, changed: bool) -> Done {

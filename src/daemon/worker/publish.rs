@@ -1,5 +1,6 @@
 //! Publishing a repaired job (see the module documentation): the names chosen and
-//! recorded, then each step done only if not done yet; the picture beside the log.
+//! recorded, then each step done only if not done yet. The picture follows the log
+//! ([`super::LatePicture`]).
 
 use super::failed::fail;
 use super::log::write_repaired_log;
@@ -358,7 +359,6 @@ pub(super) fn resume_repaired(
                 }
                 continue;
             }
-            publish_picture(&job, &l.outbox.join(format!("{output}.repair.png")), rule);
             match fsops::publish(&tmp_log, &log_path, rule) {
                 Ok(()) => {}
                 Err(e) if e.kind() == io::ErrorKind::AlreadyExists => continue,
@@ -370,8 +370,9 @@ pub(super) fn resume_repaired(
             ctx.hooks.at("log-published", &job.name);
         }
         job.forget();
-        for s in tmp_files(&job) {
-            let _ = fs::remove_file(job.tmp(&s));
+        // the picture, which the child may still be drawing, is its waiter's
+        for s in tmp_files(&job).iter().filter(|s| *s != PICTURE) {
+            let _ = fs::remove_file(job.tmp(s));
         }
         return Done::Repaired {
             job,
@@ -381,26 +382,11 @@ pub(super) fn resume_repaired(
             failed,
             secs: t.t0.elapsed().as_secs_f64(),
             resumed,
+            picture: None,
         };
     }
     later(
         job,
         "no free output or archive name after many tries".into(),
     )
-}
-
-/// Moves the worker's picture (if it drew one) to `dst`, beside where the log goes
-/// next. Best effort: a repair is complete without its picture, so a name taken by
-/// someone else or an error loses only the picture (with a warning). After a crash the
-/// picture is already there, or still in the temporary folder, or lost with that
-/// folder.
-fn publish_picture(job: &Job, dst: &Path, rule: Collision) {
-    let tmp = job.tmp(PICTURE);
-    if !fs::symlink_metadata(&tmp).is_ok_and(|m| m.is_file()) {
-        return;
-    }
-    if let Err(e) = fsops::publish(&tmp, dst, rule) {
-        tracing::warn!(file = %job.shown(), "{}: the picture is not published as {}: {e}", job.shown(), dst.display());
-        let _ = fs::remove_file(&tmp);
-    }
 }

@@ -85,7 +85,8 @@ pub(super) async fn attempt(
     let mesh = input.join(&scan.scan);
     let model = out_dir.join(&scan.scan);
     let child_log = dir.join("child.json");
-    let (end, stderr) = child::run(
+    // no picture here (the spec has none): the child ends before `run` returns
+    let (end, stderr, _) = child::run(
         &ctx.spec(),
         &scan.scan,
         Input::Path(&mesh),
