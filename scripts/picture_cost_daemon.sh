@@ -5,7 +5,9 @@
 # each file's time from its repair log (`daemon.seconds`: from taking the file to its
 # log, the child's read, repair, picture and write and the daemon's publishing).
 # Prints per mesh the median time without and with the picture and the median of the
-# per-round ratios, then the median of the per-mesh ratios and the ratio of the sums.
+# per-round ratios, then the median of the per-mesh ratios and the ratio of the sums;
+# then the whole burst's wall time (from the drop to the last log published, and to
+# the last picture), median over the rounds: what the pictures cost in throughput.
 #
 #   scripts/picture_cost_daemon.sh BIN [ROUNDS] [WORKERS]   (default 5 rounds, 1 worker)
 #
@@ -47,8 +49,16 @@ run() {
   daemon=$!
   until [ -d "$dir/outbox" ]; do sleep 0.05; done
   for f in "$tmp"/src/*.obj; do cp "$f" "$dir/inbox/.$(basename "$f").part"; done
+  local t0 t1 t2
+  t0=$(date +%s.%N)
   for f in "$tmp"/src/*.obj; do b=$(basename "$f"); mv "$dir/inbox/.$b.part" "$dir/inbox/$b"; done
-  until [ "$(ls "$dir"/outbox/*.repair.json 2>/dev/null | wc -l)" -ge "$count" ]; do sleep 0.1; done
+  until [ "$(ls "$dir"/outbox/*.repair.json 2>/dev/null | wc -l)" -ge "$count" ]; do sleep 0.02; done
+  t1=$(date +%s.%N)
+  if [ "$mode" = true ]; then
+    until [ "$(ls "$dir"/outbox/*.repair.png 2>/dev/null | wc -l)" -ge "$count" ]; do sleep 0.02; done
+  fi
+  t2=$(date +%s.%N)
+  echo "$t0 $t1 $t2" | awk '{print $2 - $1, $3 - $1}' >>"$tmp/burst-$mode"
   kill "$daemon"; wait "$daemon" 2>/dev/null || true; daemon=""
   python3 - "$dir/outbox" >>"$tmp/times-$mode" <<'PY'
 import json, pathlib, sys
@@ -59,12 +69,12 @@ PY
 }
 
 run false; run true   # warm-up, not counted
-: >"$tmp/times-false"; : >"$tmp/times-true"
+: >"$tmp/times-false"; : >"$tmp/times-true"; : >"$tmp/burst-false"; : >"$tmp/burst-true"
 for r in $(seq "$ROUNDS"); do
   if [ $((r % 2)) -eq 1 ]; then run false; run true; else run true; run false; fi
 done
 
-python3 - "$tmp/times-false" "$tmp/times-true" <<'PY'
+python3 - "$tmp/times-false" "$tmp/times-true" "$tmp/burst-false" "$tmp/burst-true" <<'PY'
 import statistics as st, sys
 def load(p):
     t = {}
@@ -82,4 +92,10 @@ for n in sorted(a):
     print("%-22s %10.3f %10.3f %8.3f" % (n, ma, mb, r))
 print("%-22s %10.3f %10.3f %8.3f" % ("all (sum of medians)", sa, sb, sb / sa))
 print("%-22s %10s %10s %8.3f" % ("median of the ratios", "", "", st.median(ratios)))
+off = [float(l.split()[0]) for l in open(sys.argv[3])]
+on = [l.split() for l in open(sys.argv[4])]
+logs, pics = [float(l[0]) for l in on], [float(l[1]) for l in on]
+print("burst wall time (median of %d rounds): without %.2f s; with: last log %.2f s (%.3fx), last picture %.2f s (%.3fx)"
+      % (len(off), st.median(off), st.median(logs), st.median(logs) / st.median(off),
+         st.median(pics), st.median(pics) / st.median(off)))
 PY

@@ -280,14 +280,16 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
 
     // The picture's sketch (the input's surface) is drawn while the input is
     // repaired: a job on the fill's pool, which its worker, waiting for the fill,
-    // takes at once (with one thread there is no pool: the picture is drawn after).
+    // takes at once (with one thread there is no pool: the picture is drawn after;
+    // with --picture-after-log nothing of it is drawn before the log, which would
+    // delay the repair whenever every core is busy).
     let picture_opts = holefill::picture::Options::default();
     let threads = policy.limits.fill_threads();
     let mut sketch: Option<(holefill::picture::Sketch, Duration)> = None;
     // an internal error (a bug) must still end in a clear message and EX_SOFTWARE,
     // with nothing written, rather than an abort
     let repaired = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-        if args.picture.is_none() || threads < 2 {
+        if args.picture.is_none() || threads < 2 || args.picture_after_log {
             return holefill::repair(&raw, &policy);
         }
         rayon::in_place_scope(|s| {
@@ -373,9 +375,6 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
     } else {
         exit::OK
     };
-    let sketch_ms = sketch
-        .as_ref()
-        .map_or(0.0, |(_, took)| took.as_secs_f64() * 1000.0);
     let picture = |report: &holefill::report::RepairReport| {
         let t = Instant::now();
         let (picture, sketched) = match sketch {
@@ -390,11 +389,10 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
 
     if let (Some(path), true) = (&args.picture, args.picture_after_log) {
         // the daemon's child: the model and the log first, then the picture at the
-        // lowest priority (the log's picture_ms is what the sketch took during the repair)
+        // lowest priority (the log's picture_ms is 0: nothing of it is drawn before)
         let t = Instant::now();
         holefill::write(&args.output, &out, Some(out_format)).map_err(io_failure)?;
         report.timings.write_ms = t.elapsed().as_secs_f64() * 1000.0;
-        report.timings.picture_ms = sketch_ms;
         if let Some(log) = &args.report {
             write_report(log, &report.to_json())?;
         }
@@ -409,7 +407,9 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
         }
         let drawn = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| picture(&report)));
         match drawn {
-            Ok((Ok(png), _)) => holefill::io::write_atomic(path, &png).map_err(io_failure)?,
+            // not synced: the log and the model are, and the next repair's syncs
+            // must not wait for a picture's
+            Ok((Ok(png), _)) => holefill::io::write_unsynced(path, &png).map_err(io_failure)?,
             Ok((Err(e), _)) => eprintln!("warning: {}: {e}", path.display()),
             Err(_) => eprintln!(
                 "warning: {}: internal error while drawing the picture; none written",

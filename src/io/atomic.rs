@@ -23,7 +23,18 @@ pub(crate) fn write_with<F>(path: &Path, body: F) -> Result<(), IoError>
 where
     F: FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
 {
-    stage_with(path, body)?.commit()
+    stage_with(path, body, true)?.commit()
+}
+
+/// Writes bytes in place by a rename, as [`write_atomic`] does, but syncs nothing: for
+/// a file derived from others (a repair's picture), whose loss in a power cut costs
+/// only itself, so that writing it never makes other files' syncs wait (on ext4 each
+/// sync commits the journal for every file).
+pub fn write_unsynced(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
+    let mut staged = stage_with(path, |w| w.write_all(bytes), false)?;
+    std::fs::rename(&staged.tmp, &staged.path).map_err(|e| io_error(path, e))?;
+    staged.committed = true;
+    Ok(())
 }
 
 /// A file written and synced beside its target but not in place yet:
@@ -40,10 +51,11 @@ pub struct Staged {
 
 /// Writes `bytes` to a temporary file next to `path` and syncs it (see [`Staged`]).
 pub fn stage(path: &Path, bytes: &[u8]) -> Result<Staged, IoError> {
-    stage_with(path, |w| w.write_all(bytes))
+    stage_with(path, |w| w.write_all(bytes), true)
 }
 
-fn stage_with<F>(path: &Path, body: F) -> Result<Staged, IoError>
+/// The file written beside `path` by `body`, and synced when `sync`.
+fn stage_with<F>(path: &Path, body: F, sync: bool) -> Result<Staged, IoError>
 where
     F: FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
 {
@@ -81,7 +93,7 @@ where
     let mut w = BufWriter::with_capacity(BUF_CAPACITY, file);
     let synced = body(&mut w)
         .and_then(|()| w.into_inner().map_err(|e| e.into_error()))
-        .and_then(|file| file.sync_all());
+        .and_then(|file| if sync { file.sync_all() } else { Ok(()) });
     synced.map_err(|e| io_error(path, e))?;
     Ok(staged)
 }
@@ -135,6 +147,18 @@ mod tests {
         write_atomic(&p, b"second").unwrap();
         assert_eq!(std::fs::read(&p).unwrap(), b"second");
         assert!(leftovers(d.path()).is_empty());
+    }
+
+    #[test]
+    fn unsynced_writes_replace_by_a_rename_too() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("pic.png");
+        write_unsynced(&p, b"first").unwrap();
+        write_unsynced(&p, b"second").unwrap();
+        assert_eq!(std::fs::read(&p).unwrap(), b"second");
+        assert!(leftovers(d.path()).is_empty());
+        let err = write_unsynced(&d.path().join("no/such/folder.png"), b"x").unwrap_err();
+        assert!(err.to_string().contains("folder.png"), "{err}");
     }
 
     #[test]

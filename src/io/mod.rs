@@ -148,7 +148,7 @@ mod ply;
 mod stl;
 mod text;
 
-pub use atomic::{stage, write_atomic, Staged};
+pub use atomic::{stage, write_atomic, write_unsynced, Staged};
 
 use std::fs::File;
 use std::io::{BufReader, Write};

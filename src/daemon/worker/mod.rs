@@ -530,8 +530,8 @@ impl LatePicture {
         let published = tokio::task::spawn_blocking(move || {
             let there = fs::symlink_metadata(&tmp).is_ok_and(|m| m.is_file());
             let published = match (drawn, there) {
+                // not synced, as the child wrote it (`io::write_unsynced`)
                 (Ok(()), true) => fsops::publish(&tmp, &dst, rule)
-                    .and_then(|()| fsops::fsync_dir(dst.parent().unwrap_or(Path::new("."))))
                     .map_err(|e| format!("not published as {}: {e}", dst.display()))
                     .map(|()| Some(dst)),
                 // a child that ended before it was waited for said why on its stderr
