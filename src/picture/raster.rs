@@ -42,7 +42,7 @@ impl Panel {
     /// barycentric weight at least 0); on a row, the first and the last pixel inside
     /// are found by that test and the pixels between them taken as inside (a triangle
     /// is convex), so that a wide triangle costs a depth test per pixel.
-    pub fn triangle(&mut self, v: [[f32; 3]; 3], c: Ink) {
+    pub fn triangle(&mut self, v: [[f32; 3]; 3], ink: impl Fn() -> Ink) {
         if self.z.len() != self.w * self.h {
             return; // a flat panel
         }
@@ -55,7 +55,7 @@ impl Panel {
             && near(y1)
             && near(x2)
             && near(y2)
-            && self.small_triangle(v, c)
+            && self.small_triangle(v, &ink)
         {
             return;
         }
@@ -101,6 +101,7 @@ impl Panel {
             let l1 = a1 * x + r1;
             l0 >= 0.0 && l1 >= 0.0 && 1.0 - l0 - l1 >= 0.0
         };
+        let mut c = None;
         for py in py0..=py1 {
             let y = py as f32 + 0.5;
             let r0 = b0 * y + c0;
@@ -143,7 +144,7 @@ impl Panel {
                 let z = zr + zx * ((sx0 + k) as f32 + 0.5);
                 if z < *zd {
                     *zd = z;
-                    *pd = c;
+                    *pd = *c.get_or_insert_with(&ink);
                 }
             }
         }
@@ -155,7 +156,7 @@ impl Panel {
     /// fixed point (1/256 pixel, rounded), the bounds and the edge functions in
     /// integers, stepped from pixel to pixel, exactly (a pixel centre on an edge is
     /// inside); the depth is the plane's, as in the general case.
-    fn small_triangle(&mut self, v: [[f32; 3]; 3], c: Ink) -> bool {
+    fn small_triangle(&mut self, v: [[f32; 3]; 3], ink: &impl Fn() -> Ink) -> bool {
         // t * SUB rounded to an integer without a conversion's range checks: below
         // 2^22, the sum with 1.5 * 2^23 holds it in its low mantissa bits
         const MAGIC: f32 = 12_582_912.0;
@@ -197,6 +198,7 @@ impl Panel {
         // depth, affine in the pixel centre (in f32, from the unsnapped corners)
         let Plane { zx, zy, zc, .. } = Plane::new(v, area);
         let (mut r0, mut r1, mut r2) = (e0, e1, e2);
+        let mut c = None;
         let n = px1 - px0 + 1;
         for py in py0..py1 + 1 {
             let zr = zc + zy * (py as f32 + 0.5);
@@ -211,7 +213,7 @@ impl Panel {
                     let z = zr + zx * x;
                     if z < *zd {
                         *zd = z;
-                        *pd = c;
+                        *pd = *c.get_or_insert_with(ink);
                     }
                 }
                 w0 += sx0;
@@ -411,25 +413,25 @@ mod tests {
     #[test]
     fn a_triangle_covers_its_inside_and_the_nearer_one_wins() {
         let mut p = Panel::new(20, 20, BG);
-        p.triangle([[0.0, 0.0, 1.0], [20.0, 0.0, 1.0], [0.0, 20.0, 1.0]], 7);
+        p.triangle([[0.0, 0.0, 1.0], [20.0, 0.0, 1.0], [0.0, 20.0, 1.0]], || 7);
         assert_eq!(p.at(2, 2), 7);
         assert_eq!(p.at(18, 18), BG, "outside the hypotenuse");
         // a farther one behind does not show, a nearer one does
-        p.triangle([[0.0, 0.0, 2.0], [10.0, 0.0, 2.0], [0.0, 10.0, 2.0]], 8);
+        p.triangle([[0.0, 0.0, 2.0], [10.0, 0.0, 2.0], [0.0, 10.0, 2.0]], || 8);
         assert_eq!(p.at(2, 2), 7);
-        p.triangle([[0.0, 0.0, 0.5], [10.0, 0.0, 0.5], [0.0, 10.0, 0.5]], 9);
+        p.triangle([[0.0, 0.0, 0.5], [10.0, 0.0, 0.5], [0.0, 10.0, 0.5]], || 9);
         assert_eq!(p.at(2, 2), 9);
         // either winding
         let mut q = Panel::new(20, 20, BG);
-        q.triangle([[0.0, 0.0, 1.0], [0.0, 20.0, 1.0], [20.0, 0.0, 1.0]], 9);
+        q.triangle([[0.0, 0.0, 1.0], [0.0, 20.0, 1.0], [20.0, 0.0, 1.0]], || 9);
         assert_eq!(q.at(2, 2), 9);
     }
 
     #[test]
     fn two_triangles_sharing_an_edge_leave_no_gap() {
         let mut p = Panel::new(16, 16, BG);
-        p.triangle([[0.0, 0.0, 1.0], [16.0, 0.0, 1.0], [16.0, 16.0, 1.0]], 1);
-        p.triangle([[0.0, 0.0, 1.0], [16.0, 16.0, 1.0], [0.0, 16.0, 1.0]], 1);
+        p.triangle([[0.0, 0.0, 1.0], [16.0, 0.0, 1.0], [16.0, 16.0, 1.0]], || 1);
+        p.triangle([[0.0, 0.0, 1.0], [16.0, 16.0, 1.0], [0.0, 16.0, 1.0]], || 1);
         assert!(p.px.iter().all(|&c| c == 1));
     }
 
@@ -447,7 +449,7 @@ mod tests {
                 ]
             });
             let mut p = Panel::new(32, 32, BG);
-            p.triangle(v, 1);
+            p.triangle(v, || 1);
             let [[x0, y0, _], [x1, y1, _], [x2, y2, _]] = v;
             let area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0);
             if area.abs() < 1e-3 {
@@ -478,16 +480,25 @@ mod tests {
     #[test]
     fn off_screen_and_degenerate_triangles_draw_nothing() {
         let mut p = Panel::new(8, 8, BG);
-        p.triangle([[-9.0, -9.0, 1.0], [-5.0, -9.0, 1.0], [-9.0, -5.0, 1.0]], 3);
-        p.triangle([[1.0, 1.0, 1.0], [5.0, 5.0, 1.0], [3.0, 3.0, 1.0]], 3);
-        p.triangle([[f32::NAN, 1.0, 1.0], [5.0, 5.0, 1.0], [3.0, 1.0, 1.0]], 3);
+        p.triangle(
+            [[-9.0, -9.0, 1.0], [-5.0, -9.0, 1.0], [-9.0, -5.0, 1.0]],
+            || 3,
+        );
+        p.triangle([[1.0, 1.0, 1.0], [5.0, 5.0, 1.0], [3.0, 3.0, 1.0]], || 3);
+        p.triangle(
+            [[f32::NAN, 1.0, 1.0], [5.0, 5.0, 1.0], [3.0, 1.0, 1.0]],
+            || 3,
+        );
         assert!(p.px.iter().all(|&b| b == 0));
     }
 
     #[test]
     fn a_hidden_line_is_faded_and_a_visible_one_is_not() {
         let mut p = Panel::new(20, 20, BG);
-        p.triangle([[0.0, 0.0, 1.0], [40.0, 0.0, 1.0], [0.0, 40.0, 1.0]], 100);
+        p.triangle(
+            [[0.0, 0.0, 1.0], [40.0, 0.0, 1.0], [0.0, 40.0, 1.0]],
+            || 100,
+        );
         p.line([2.0, 5.5, 0.5], [18.0, 5.5, 0.5], 200, 1, 0.0, Some(150));
         assert_eq!(p.at(10, 5), 200);
         p.line([2.0, 9.5, 3.0], [18.0, 9.5, 3.0], 200, 1, 0.0, Some(150));
@@ -503,7 +514,7 @@ mod tests {
     #[test]
     fn a_flat_panel_takes_text_and_copies_but_no_triangles() {
         let mut p = Panel::flat(12, 12, BG);
-        p.triangle([[0.0, 0.0, 1.0], [12.0, 0.0, 1.0], [0.0, 12.0, 1.0]], 7);
+        p.triangle([[0.0, 0.0, 1.0], [12.0, 0.0, 1.0], [0.0, 12.0, 1.0]], || 7);
         p.line([0.0, 6.5, 0.0], [12.0, 6.5, 0.0], 7, 1, 0.0, Some(7));
         assert!(p.px.iter().all(|&b| b == 0));
         p.text(0, 0, "#1", 255, 1);
