@@ -38,7 +38,8 @@ impl Panel {
     }
 
     /// Fills a triangle of screen points `(x, y, depth)` with one ink where it is
-    /// nearer than what is drawn. A pixel is inside when its centre is (every
+    /// nearer than what is drawn; `ink()` is called when it first draws a pixel (a
+    /// face hidden, or between pixel centres, is not shaded). A pixel is inside when its centre is (every
     /// barycentric weight at least 0); on a row, the first and the last pixel inside
     /// are found by that test and the pixels between them taken as inside (a triangle
     /// is convex), so that a wide triangle costs a depth test per pixel.
@@ -155,7 +156,8 @@ impl Panel {
     /// (most faces of a picture; `false`, nothing drawn, otherwise). The corners in
     /// fixed point (1/256 pixel, rounded), the bounds and the edge functions in
     /// integers, stepped from pixel to pixel, exactly (a pixel centre on an edge is
-    /// inside); the depth is the plane's, as in the general case.
+    /// inside); the depth is the plane's, as in the general case, from the pixel
+    /// centre's coordinates (exact in f32).
     fn small_triangle(&mut self, v: [[f32; 3]; 3], ink: &impl Fn() -> Ink) -> bool {
         // t * SUB rounded to an integer without a conversion's range checks: below
         // 2^22, the sum with 1.5 * 2^23 holds it in its low mantissa bits
@@ -199,31 +201,33 @@ impl Panel {
         let Plane { zx, zy, zc, .. } = Plane::new(v, area);
         let (mut r0, mut r1, mut r2) = (e0, e1, e2);
         let mut c = None;
-        let n = px1 - px0 + 1;
-        for py in py0..py1 + 1 {
-            let zr = zc + zy * (py as f32 + 0.5);
-            let start = py * self.w + px0;
-            let zs = &mut self.z[start..start + n];
-            let ps = &mut self.px[start..start + n];
+        let (w, n) = (self.w, px1 - px0 + 1);
+        // the bounds' rows, each from its first pixel (the last one n pixels long)
+        let span = py0 * w + px0..py1 * w + px1 + 1;
+        let (zs, ps) = (&mut self.z[span.clone()], &mut self.px[span]);
+        // the pixel centres' coordinates: exact in f32 (integers and a half)
+        let (mut y, x0) = (py0 as f32 + 0.5, px0 as f32 + 0.5);
+        let mut row = 0;
+        while row < zs.len() {
+            let zr = zc + zy * y;
             let (mut w0, mut w1, mut w2) = (r0, r1, r2);
-            // the pixel centre's x: exact in f32 (an integer and a half)
-            let mut x = px0 as f32 + 0.5;
-            for (zd, pd) in zs.iter_mut().zip(ps.iter_mut()) {
+            for k in row..row + n {
                 if (w0 | w1 | w2) >= 0 {
-                    let z = zr + zx * x;
-                    if z < *zd {
-                        *zd = z;
-                        *pd = *c.get_or_insert_with(ink);
+                    let z = zr + zx * ((k - row) as u32 as f32 + x0);
+                    if z < zs[k] {
+                        zs[k] = z;
+                        ps[k] = *c.get_or_insert_with(ink);
                     }
                 }
                 w0 += sx0;
                 w1 += sx1;
                 w2 += sx2;
-                x += 1.0;
             }
             r0 += sy0;
             r1 += sy1;
             r2 += sy2;
+            y += 1.0;
+            row += w;
         }
         true
     }
