@@ -235,10 +235,11 @@ pub(super) fn neighbourhoods(
         let b = ((c + r - lo) / size * G as f64).floor().as_ivec3();
         let a = a.clamp(glam::IVec3::ZERO, glam::IVec3::splat(G as i32 - 1));
         let b = b.clamp(glam::IVec3::ZERO, glam::IVec3::splat(G as i32 - 1));
+        let zs = a.z as usize..(b.z + 1).max(a.z) as usize;
         for x in a.x..=b.x {
             for y in a.y..=b.y {
                 let row = (x as usize * G + y as usize) * G;
-                for m in &mut mask[row + a.z as usize..=row + b.z as usize] {
+                for m in &mut mask[row + zs.start..row + zs.end] {
                     *m |= 1 << k;
                 }
             }
