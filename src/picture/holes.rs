@@ -235,10 +235,12 @@ pub(super) fn neighbourhoods(
         let b = ((c + r - lo) / size * G as f64).floor().as_ivec3();
         let a = a.clamp(glam::IVec3::ZERO, glam::IVec3::splat(G as i32 - 1));
         let b = b.clamp(glam::IVec3::ZERO, glam::IVec3::splat(G as i32 - 1));
+        let zs = a.z as usize..(b.z + 1).max(a.z) as usize;
         for x in a.x..=b.x {
             for y in a.y..=b.y {
-                for z in a.z..=b.z {
-                    mask[(x as usize * G + y as usize) * G + z as usize] |= 1 << k;
+                let row = (x as usize * G + y as usize) * G;
+                for m in &mut mask[row + zs.start..row + zs.end] {
+                    *m |= 1 << k;
                 }
             }
         }
@@ -298,7 +300,8 @@ pub(super) fn soup_loops(faces: &[[u32; 3]], vertices: usize) -> Vec<Vec<u32>> {
     let ok = |f: &[u32; 3]| {
         f.iter().all(|&v| (v as usize) < vertices) && f[0] != f[1] && f[1] != f[2] && f[0] != f[2]
     };
-    // each vertex's outgoing edges, in one array (offsets per vertex)
+    // each vertex's corners, in one array (offsets per vertex): the corner's next
+    // and previous vertex, its face's edges out of and into the vertex
     let mut start = vec![0u32; vertices + 1];
     for f in faces.iter().filter(|f| ok(f)) {
         for &v in f {
@@ -309,25 +312,26 @@ pub(super) fn soup_loops(faces: &[[u32; 3]], vertices: usize) -> Vec<Vec<u32>> {
         start[i + 1] += start[i];
     }
     let mut fill = start.clone();
-    let mut to = vec![0u32; start[vertices] as usize];
+    let mut corners = vec![[0u32; 2]; start[vertices] as usize];
     for f in faces.iter().filter(|f| ok(f)) {
         for i in 0..3 {
             let a = f[i] as usize;
-            to[fill[a] as usize] = f[(i + 1) % 3];
+            corners[fill[a] as usize] = [f[(i + 1) % 3], f[(i + 2) % 3]];
             fill[a] += 1;
         }
     }
-    let out = |v: u32| &to[start[v as usize] as usize..start[v as usize + 1] as usize];
-    // the loop goes against the faces: a boundary edge a -> b makes a follow b
+    // the loop goes against the faces: a boundary edge a -> b makes a follow b; an
+    // edge b -> a comes into a
     let mut next = vec![NONE; vertices];
     let mut forked = vec![false; vertices];
-    for a in 0..vertices as u32 {
-        for &b in out(a) {
-            // most edges have their twin: looked for first
-            if !out(b).contains(&a) && out(a).iter().filter(|&&c| c == b).count() == 1 {
+    for a in 0..vertices {
+        let at = &corners[start[a] as usize..start[a + 1] as usize];
+        for &[b, _] in at {
+            if !at.iter().any(|&[_, p]| p == b) && at.iter().filter(|&&[c, _]| c == b).count() == 1
+            {
                 let n = &mut next[b as usize];
                 if *n == NONE {
-                    *n = a;
+                    *n = a as u32;
                 } else {
                     forked[b as usize] = true;
                 }

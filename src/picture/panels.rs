@@ -36,13 +36,13 @@ pub(super) fn overview_surface(
             ) else {
                 continue;
             };
-            over.triangle([a, b, c], shade_projected(cam, [a, b, c], None));
+            over.triangle([a, b, c], || shade_projected(cam, [a, b, c], None));
         }
     } else {
         for &face in faces.iter().step_by(stride) {
             if let Some(world) = corners(pos, face) {
                 let s = world.map(|p| cam.project(p));
-                over.triangle(s, shade_projected(cam, s, None));
+                over.triangle(s, || shade_projected(cam, s, None));
             }
         }
     }
@@ -64,7 +64,7 @@ pub(super) fn overview_finish(
         if let Some(world) = corners(pos, face) {
             let s = world.map(|p| cam.project(p));
             let status = owners.status(f as u32);
-            over.triangle(s, shade_projected(cam, s, status));
+            over.triangle(s, || shade_projected(cam, s, status));
         }
     }
     let bias = (cam.extent * 0.004) as f32;

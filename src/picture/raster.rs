@@ -38,11 +38,12 @@ impl Panel {
     }
 
     /// Fills a triangle of screen points `(x, y, depth)` with one ink where it is
-    /// nearer than what is drawn. A pixel is inside when its centre is (every
+    /// nearer than what is drawn; `ink()` is called when it first draws a pixel (a
+    /// face hidden, or between pixel centres, is not shaded). A pixel is inside when its centre is (every
     /// barycentric weight at least 0); on a row, the first and the last pixel inside
     /// are found by that test and the pixels between them taken as inside (a triangle
     /// is convex), so that a wide triangle costs a depth test per pixel.
-    pub fn triangle(&mut self, v: [[f32; 3]; 3], c: Ink) {
+    pub fn triangle(&mut self, v: [[f32; 3]; 3], ink: impl Fn() -> Ink) {
         if self.z.len() != self.w * self.h {
             return; // a flat panel
         }
@@ -55,7 +56,7 @@ impl Panel {
             && near(y1)
             && near(x2)
             && near(y2)
-            && self.small_triangle(v, c)
+            && self.small_triangle(v, &ink)
         {
             return;
         }
@@ -101,6 +102,7 @@ impl Panel {
             let l1 = a1 * x + r1;
             l0 >= 0.0 && l1 >= 0.0 && 1.0 - l0 - l1 >= 0.0
         };
+        let mut c = None;
         for py in py0..=py1 {
             let y = py as f32 + 0.5;
             let r0 = b0 * y + c0;
@@ -143,7 +145,7 @@ impl Panel {
                 let z = zr + zx * ((sx0 + k) as f32 + 0.5);
                 if z < *zd {
                     *zd = z;
-                    *pd = c;
+                    *pd = *c.get_or_insert_with(&ink);
                 }
             }
         }
@@ -154,8 +156,9 @@ impl Panel {
     /// (most faces of a picture; `false`, nothing drawn, otherwise). The corners in
     /// fixed point (1/256 pixel, rounded), the bounds and the edge functions in
     /// integers, stepped from pixel to pixel, exactly (a pixel centre on an edge is
-    /// inside); the depth is the plane's, as in the general case.
-    fn small_triangle(&mut self, v: [[f32; 3]; 3], c: Ink) -> bool {
+    /// inside); the depth is the plane's, as in the general case, from the pixel
+    /// centre's coordinates (exact in f32).
+    fn small_triangle(&mut self, v: [[f32; 3]; 3], ink: &impl Fn() -> Ink) -> bool {
         // t * SUB rounded to an integer without a conversion's range checks: below
         // 2^22, the sum with 1.5 * 2^23 holds it in its low mantissa bits
         const MAGIC: f32 = 12_582_912.0;
@@ -197,31 +200,34 @@ impl Panel {
         // depth, affine in the pixel centre (in f32, from the unsnapped corners)
         let Plane { zx, zy, zc, .. } = Plane::new(v, area);
         let (mut r0, mut r1, mut r2) = (e0, e1, e2);
-        let n = px1 - px0 + 1;
-        for py in py0..py1 + 1 {
-            let zr = zc + zy * (py as f32 + 0.5);
-            let start = py * self.w + px0;
-            let zs = &mut self.z[start..start + n];
-            let ps = &mut self.px[start..start + n];
+        let mut c = None;
+        let (w, n) = (self.w, px1 - px0 + 1);
+        // the bounds' rows, each from its first pixel (the last one n pixels long)
+        let span = py0 * w + px0..py1 * w + px1 + 1;
+        let (zs, ps) = (&mut self.z[span.clone()], &mut self.px[span]);
+        // the pixel centres' coordinates: exact in f32 (integers and a half)
+        let (mut y, x0) = (py0 as f32 + 0.5, px0 as f32 + 0.5);
+        let mut row = 0;
+        while row < zs.len() {
+            let zr = zc + zy * y;
             let (mut w0, mut w1, mut w2) = (r0, r1, r2);
-            // the pixel centre's x: exact in f32 (an integer and a half)
-            let mut x = px0 as f32 + 0.5;
-            for (zd, pd) in zs.iter_mut().zip(ps.iter_mut()) {
+            for k in row..row + n {
                 if (w0 | w1 | w2) >= 0 {
-                    let z = zr + zx * x;
-                    if z < *zd {
-                        *zd = z;
-                        *pd = c;
+                    let z = zr + zx * ((k - row) as u32 as f32 + x0);
+                    if z < zs[k] {
+                        zs[k] = z;
+                        ps[k] = *c.get_or_insert_with(ink);
                     }
                 }
                 w0 += sx0;
                 w1 += sx1;
                 w2 += sx2;
-                x += 1.0;
             }
             r0 += sy0;
             r1 += sy1;
             r2 += sy2;
+            y += 1.0;
+            row += w;
         }
         true
     }
@@ -411,25 +417,25 @@ mod tests {
     #[test]
     fn a_triangle_covers_its_inside_and_the_nearer_one_wins() {
         let mut p = Panel::new(20, 20, BG);
-        p.triangle([[0.0, 0.0, 1.0], [20.0, 0.0, 1.0], [0.0, 20.0, 1.0]], 7);
+        p.triangle([[0.0, 0.0, 1.0], [20.0, 0.0, 1.0], [0.0, 20.0, 1.0]], || 7);
         assert_eq!(p.at(2, 2), 7);
         assert_eq!(p.at(18, 18), BG, "outside the hypotenuse");
         // a farther one behind does not show, a nearer one does
-        p.triangle([[0.0, 0.0, 2.0], [10.0, 0.0, 2.0], [0.0, 10.0, 2.0]], 8);
+        p.triangle([[0.0, 0.0, 2.0], [10.0, 0.0, 2.0], [0.0, 10.0, 2.0]], || 8);
         assert_eq!(p.at(2, 2), 7);
-        p.triangle([[0.0, 0.0, 0.5], [10.0, 0.0, 0.5], [0.0, 10.0, 0.5]], 9);
+        p.triangle([[0.0, 0.0, 0.5], [10.0, 0.0, 0.5], [0.0, 10.0, 0.5]], || 9);
         assert_eq!(p.at(2, 2), 9);
         // either winding
         let mut q = Panel::new(20, 20, BG);
-        q.triangle([[0.0, 0.0, 1.0], [0.0, 20.0, 1.0], [20.0, 0.0, 1.0]], 9);
+        q.triangle([[0.0, 0.0, 1.0], [0.0, 20.0, 1.0], [20.0, 0.0, 1.0]], || 9);
         assert_eq!(q.at(2, 2), 9);
     }
 
     #[test]
     fn two_triangles_sharing_an_edge_leave_no_gap() {
         let mut p = Panel::new(16, 16, BG);
-        p.triangle([[0.0, 0.0, 1.0], [16.0, 0.0, 1.0], [16.0, 16.0, 1.0]], 1);
-        p.triangle([[0.0, 0.0, 1.0], [16.0, 16.0, 1.0], [0.0, 16.0, 1.0]], 1);
+        p.triangle([[0.0, 0.0, 1.0], [16.0, 0.0, 1.0], [16.0, 16.0, 1.0]], || 1);
+        p.triangle([[0.0, 0.0, 1.0], [16.0, 16.0, 1.0], [0.0, 16.0, 1.0]], || 1);
         assert!(p.px.iter().all(|&c| c == 1));
     }
 
@@ -447,7 +453,7 @@ mod tests {
                 ]
             });
             let mut p = Panel::new(32, 32, BG);
-            p.triangle(v, 1);
+            p.triangle(v, || 1);
             let [[x0, y0, _], [x1, y1, _], [x2, y2, _]] = v;
             let area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0);
             if area.abs() < 1e-3 {
@@ -478,16 +484,25 @@ mod tests {
     #[test]
     fn off_screen_and_degenerate_triangles_draw_nothing() {
         let mut p = Panel::new(8, 8, BG);
-        p.triangle([[-9.0, -9.0, 1.0], [-5.0, -9.0, 1.0], [-9.0, -5.0, 1.0]], 3);
-        p.triangle([[1.0, 1.0, 1.0], [5.0, 5.0, 1.0], [3.0, 3.0, 1.0]], 3);
-        p.triangle([[f32::NAN, 1.0, 1.0], [5.0, 5.0, 1.0], [3.0, 1.0, 1.0]], 3);
+        p.triangle(
+            [[-9.0, -9.0, 1.0], [-5.0, -9.0, 1.0], [-9.0, -5.0, 1.0]],
+            || 3,
+        );
+        p.triangle([[1.0, 1.0, 1.0], [5.0, 5.0, 1.0], [3.0, 3.0, 1.0]], || 3);
+        p.triangle(
+            [[f32::NAN, 1.0, 1.0], [5.0, 5.0, 1.0], [3.0, 1.0, 1.0]],
+            || 3,
+        );
         assert!(p.px.iter().all(|&b| b == 0));
     }
 
     #[test]
     fn a_hidden_line_is_faded_and_a_visible_one_is_not() {
         let mut p = Panel::new(20, 20, BG);
-        p.triangle([[0.0, 0.0, 1.0], [40.0, 0.0, 1.0], [0.0, 40.0, 1.0]], 100);
+        p.triangle(
+            [[0.0, 0.0, 1.0], [40.0, 0.0, 1.0], [0.0, 40.0, 1.0]],
+            || 100,
+        );
         p.line([2.0, 5.5, 0.5], [18.0, 5.5, 0.5], 200, 1, 0.0, Some(150));
         assert_eq!(p.at(10, 5), 200);
         p.line([2.0, 9.5, 3.0], [18.0, 9.5, 3.0], 200, 1, 0.0, Some(150));
@@ -503,7 +518,7 @@ mod tests {
     #[test]
     fn a_flat_panel_takes_text_and_copies_but_no_triangles() {
         let mut p = Panel::flat(12, 12, BG);
-        p.triangle([[0.0, 0.0, 1.0], [12.0, 0.0, 1.0], [0.0, 12.0, 1.0]], 7);
+        p.triangle([[0.0, 0.0, 1.0], [12.0, 0.0, 1.0], [0.0, 12.0, 1.0]], || 7);
         p.line([0.0, 6.5, 0.0], [12.0, 6.5, 0.0], 7, 1, 0.0, Some(7));
         assert!(p.px.iter().all(|&b| b == 0));
         p.text(0, 0, "#1", 255, 1);

@@ -151,8 +151,22 @@ fn same_surface(input: &RawMesh, mesh: &RawMesh) -> bool {
     let Some(out) = mesh.faces.get(..input.faces.len()) else {
         return false;
     };
-    let corner =
-        |pos: &[DVec3], v: u32| pos.get(v as usize).map(|p| p.to_array().map(f64::to_bits));
+    let bits = |p: &DVec3| p.to_array().map(f64::to_bits);
+    let n = input.positions.len();
+    let kept_points = mesh.positions.get(..n).is_some_and(|p| {
+        p.iter()
+            .zip(&input.positions)
+            .all(|(a, b)| bits(a) == bits(b))
+    });
+    if kept_points && out == input.faces.as_slice() {
+        // the same faces on the same points, but for a vertex past the input's
+        let (n, m) = (n as u64, mesh.positions.len() as u64);
+        return out
+            .iter()
+            .flatten()
+            .all(|&v| u64::from(v) < n || u64::from(v) >= m);
+    }
+    let corner = |pos: &[DVec3], v: u32| pos.get(v as usize).map(bits);
     out.iter().zip(&input.faces).all(|(a, b)| {
         (0..3).all(|k| corner(&mesh.positions, a[k]) == corner(&input.positions, b[k]))
     })

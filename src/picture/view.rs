@@ -136,7 +136,7 @@ pub(super) fn draw_face(
     let Some(world) = corners(pos, f) else {
         return;
     };
-    panel.triangle(world.map(|p| cam.project(p)), shade(cam, world, patch));
+    panel.triangle(world.map(|p| cam.project(p)), || shade(cam, world, patch));
 }
 
 /// Draws a boundary loop; where the surface hides it, in `hidden`.
