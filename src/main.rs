@@ -406,10 +406,16 @@ fn fill(args: &FillArgs) -> Result<u8, Failure> {
             std::thread::sleep(Duration::from_millis(ms));
         }
         let drawn = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| picture(&report)));
+        // the repair is done: a picture that cannot be made is a warning (the daemon
+        // reads it from stderr), and the exit status the announced one
         match drawn {
             // not synced: the log and the model are, and the next repair's syncs
             // must not wait for a picture's
-            Ok((Ok(png), _)) => holefill::io::write_unsynced(path, &png).map_err(io_failure)?,
+            Ok((Ok(png), _)) => {
+                if let Err(e) = holefill::io::write_unsynced(path, &png) {
+                    eprintln!("warning: {e}");
+                }
+            }
             Ok((Err(e), _)) => eprintln!("warning: {}: {e}", path.display()),
             Err(_) => eprintln!(
                 "warning: {}: internal error while drawing the picture; none written",

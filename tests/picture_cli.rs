@@ -236,6 +236,27 @@ fn the_picture_after_the_log_is_announced_once_model_and_log_are_written() {
     let (w, h, rgb) = decode(&pic);
     assert!(w >= 320 && h > 0 && count(&rgb, filled()) > 0);
 
+    // a picture that cannot be written is a warning after the announcement: the
+    // repair stands, with its exit status
+    let o = run(&[
+        "fill",
+        "--quiet",
+        "--picture-after-log",
+        input.to_str().unwrap(),
+        out.to_str().unwrap(),
+        "--report",
+        log.to_str().unwrap(),
+        "--picture",
+        dir.path().join("no/such/folder.png").to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{err}");
+    assert!(String::from_utf8_lossy(&o.stdout).contains("written 0"));
+    assert!(
+        err.contains("warning") && err.contains("folder.png"),
+        "{err}"
+    );
+
     // the flag needs a picture and a log
     let o = run(&[
         "fill",

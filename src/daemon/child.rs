@@ -297,7 +297,7 @@ impl Drawing {
             kill_group(self.pid);
             let _ = self.child.kill().await;
         }
-        let msg = stderr_message(&tail_of(self.reader.take()).await);
+        let msg = stderr_message(&tail_of(self.reader.take()).await).replace("warning: ", "");
         match end {
             ChildEnd::Exit(c) if c == self.code && msg.is_empty() => Ok(()),
             ChildEnd::Exit(c) if c == self.code => Err(msg),

@@ -39,10 +39,11 @@ impl Panel {
 
     /// Fills a triangle of screen points `(x, y, depth)` with one ink where it is
     /// nearer than what is drawn; `ink()` is called when it first draws a pixel (a
-    /// face hidden, or between pixel centres, is not shaded). A pixel is inside when its centre is (every
-    /// barycentric weight at least 0); on a row, the first and the last pixel inside
-    /// are found by that test and the pixels between them taken as inside (a triangle
-    /// is convex), so that a wide triangle costs a depth test per pixel.
+    /// face hidden, or between pixel centres, is not shaded). A pixel is inside when
+    /// its centre is (every barycentric weight at least 0); on a row, the first and
+    /// the last pixel inside are found by that test and the pixels between them taken
+    /// as inside (a triangle is convex), so that a wide triangle costs a depth test
+    /// per pixel.
     pub fn triangle(&mut self, v: [[f32; 3]; 3], ink: impl Fn() -> Ink) {
         if self.z.len() != self.w * self.h {
             return; // a flat panel
