@@ -482,9 +482,10 @@ fn announce_written(code: u8) {
     let _ = out.flush();
 }
 
-/// Lowers every thread of this process to the lowest CPU priority (nice 19), so that
-/// what is left to do (the picture) takes only the time other work leaves. On Linux
-/// a priority is a thread's; the threads started later inherit it from this one.
+/// Lowers every thread of this process (this one among them) to the lowest CPU
+/// priority (nice 19), so that what is left to do (the picture) takes only the time
+/// other work leaves. On Linux a priority is a thread's; the threads started later
+/// inherit it from this one.
 fn lowest_priority() {
     use rustix::process::{setpriority_process, Pid};
     if let Ok(tasks) = std::fs::read_dir("/proc/self/task") {
@@ -498,8 +499,10 @@ fn lowest_priority() {
                 let _ = setpriority_process(Some(tid), 19);
             }
         }
+    } else {
+        // no /proc: this thread at least
+        let _ = setpriority_process(None, 19);
     }
-    let _ = setpriority_process(None, 19);
 }
 
 fn write_report(path: &Path, json: &str) -> Result<(), Failure> {

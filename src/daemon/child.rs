@@ -210,23 +210,20 @@ pub async fn run(
         }
     };
     let end = tokio::select! {
-        end = wait_until(&mut child, deadline, limit, cancel) => end,
+        end = wait_until(&mut child, pid, deadline, limit, cancel) => end,
         code = written => {
             let drawing = Drawing { child, pid, reader, deadline, limit, code };
             return (ChildEnd::Exit(code), Vec::new(), Some(drawing));
         }
     };
-    if matches!(end, ChildEnd::Timeout(_) | ChildEnd::Cancelled) {
-        kill_group(pid);
-        let _ = child.kill().await;
-    }
     (end, tail_of(reader).await, None)
 }
 
 /// Waits for the child's exit until `deadline` or until `cancel` turns true (then
-/// `Timeout` or `Cancelled`, the child still running).
+/// `Timeout` or `Cancelled`, the child's process group killed).
 async fn wait_until(
     child: &mut tokio::process::Child,
+    pid: Option<u32>,
     deadline: Option<tokio::time::Instant>,
     limit: Option<Duration>,
     cancel: &mut watch::Receiver<bool>,
@@ -247,7 +244,7 @@ async fn wait_until(
             }
         }
     };
-    tokio::select! {
+    let end = tokio::select! {
         st = child.wait() => match st {
             Ok(st) => {
                 use std::os::unix::process::ExitStatusExt;
@@ -261,7 +258,17 @@ async fn wait_until(
         },
         _ = sleep => ChildEnd::Timeout(limit.unwrap_or_default()),
         _ = cancelled => ChildEnd::Cancelled,
+    };
+    if matches!(end, ChildEnd::Timeout(_) | ChildEnd::Cancelled) {
+        kill(child, pid).await;
     }
+    end
+}
+
+/// SIGKILL to the child's process group, then the child reaped.
+async fn kill(child: &mut tokio::process::Child, pid: Option<u32>) {
+    kill_group(pid);
+    let _ = child.kill().await;
 }
 
 /// The tail of the child's stderr once it is closed (at most 2 s after the exit).
@@ -292,11 +299,7 @@ impl Drawing {
     /// Waits for the picture: `Ok` when the child exits with the status it announced,
     /// else why not (killed at the time limit or when `cancel` turns true).
     pub async fn finish(mut self, cancel: &mut watch::Receiver<bool>) -> Result<(), String> {
-        let end = wait_until(&mut self.child, self.deadline, self.limit, cancel).await;
-        if matches!(end, ChildEnd::Timeout(_) | ChildEnd::Cancelled) {
-            kill_group(self.pid);
-            let _ = self.child.kill().await;
-        }
+        let end = wait_until(&mut self.child, self.pid, self.deadline, self.limit, cancel).await;
         let msg = stderr_message(&tail_of(self.reader.take()).await).replace("warning: ", "");
         match end {
             ChildEnd::Exit(c) if c == self.code && msg.is_empty() => Ok(()),
@@ -308,8 +311,7 @@ impl Drawing {
 
     /// Kills the child and waits for it to end (its picture is not wanted).
     pub async fn abandon(mut self) {
-        kill_group(self.pid);
-        let _ = self.child.kill().await;
+        kill(&mut self.child, self.pid).await;
     }
 }
 

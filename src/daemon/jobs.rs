@@ -17,18 +17,14 @@ impl Daemon {
     /// Claims ready files while fewer than `workers` repairs run (and fewer than twice
     /// as many pictures are being drawn: each holds its child's memory).
     pub(super) fn dispatch(&mut self) {
-        if self.working.len() >= self.settings.workers
-            || self.drawing.len() >= 2 * self.settings.workers
-        {
+        if !self.room() {
             return;
         }
         if !self.check_folders(false) {
             return;
         }
         self.advance_sets();
-        while self.working.len() < self.settings.workers
-            && self.drawing.len() < 2 * self.settings.workers
-        {
+        while self.room() {
             let now = Instant::now();
             if let Some(pos) = self.again.iter().position(|(_, t)| *t <= now) {
                 if let Some((job, _)) = self.again.remove(pos) {
@@ -70,6 +66,12 @@ impl Daemon {
                 }
             }
         }
+    }
+
+    /// Room for another repair: fewer than `workers` running and fewer than twice as
+    /// many pictures being drawn.
+    fn room(&self) -> bool {
+        self.working.len() < self.settings.workers && self.drawing.len() < 2 * self.settings.workers
     }
 
     pub(super) fn spawn(&mut self, job: Job) {
