@@ -7,6 +7,7 @@
 
 pub mod clean;
 pub mod islands;
+pub mod pinch;
 pub mod stitch;
 
 use crate::check::Checker;
@@ -144,7 +145,15 @@ fn fill_all(
     degenerate: &mut usize,
     traces: &mut Vec<HoleTrace>,
 ) -> Vec<HoleReport> {
-    let (mut holes, mut skip, comp) = find_holes(mesh, policy);
+    let (mut holes, mut skip, mut comp) = find_holes(mesh, policy);
+    // loops pinched at a split vertex: each cut into two, the smaller lobe filled
+    let mut pinches: Vec<pinch::Pinch> = Vec::new();
+    if let Some((m, closed)) = pinch::close_pinches(mesh, &holes, &skip, policy) {
+        *mesh = m;
+        pinches = closed;
+        (holes, skip, comp) = find_holes(mesh, policy);
+    }
+    let pinch_faces: usize = pinches.iter().map(|p| p.added_faces).sum();
     // islands inside holes: removed or bridged (the mesh changes), or their hole skipped
     let (changed, notes) = islands::resolve(mesh, &holes, &skip, &comp, policy);
     // the border rule's decisions are those made before: a loop the islands did not
@@ -163,8 +172,8 @@ fn fill_all(
         (holes, skip, _) = find_holes(mesh, policy);
     }
     let bridged: usize = notes.iter().map(|n| n.bridged).sum();
-    // the bridges' faces are the first ones added
-    let input_faces = mesh.num_faces() - 2 * bridged;
+    // the lobes' faces of the pinches, then the bridges', are the first ones added
+    let input_faces = mesh.num_faces() - 2 * bridged - pinch_faces;
     let mut note_of: crate::fasthash::HashMap<VertexId, usize> = Default::default();
     for (n, note) in notes.iter().enumerate() {
         for &v in &note.outer {
@@ -225,6 +234,7 @@ fn fill_all(
     if policy.rim.trim {
         trim_failed(mesh, &holes, &mut out, traces, policy, input_faces);
     }
+    pinch_notes(mesh, &holes, &mut out, traces, &pinches, policy);
     for (rep, note) in out.iter_mut().zip(&hole_note) {
         if let Some(n) = note {
             rep.island_faces_removed = n.faces_removed;
@@ -239,6 +249,71 @@ fn fill_all(
         }
     }
     out
+}
+
+/// Adds the pinches closed before the fill to the log entries of their holes (the
+/// hole whose loop runs through the joined vertex), and an entry of their own for
+/// the loops that joining closed completely.
+fn pinch_notes(
+    mesh: &Mesh,
+    holes: &[Hole],
+    out: &mut Vec<HoleReport>,
+    traces: &mut Vec<HoleTrace>,
+    pinches: &[pinch::Pinch],
+    policy: &Policy,
+) {
+    let mut own: Vec<(usize, Vec<VertexId>)> = Vec::new();
+    for p in pinches {
+        let what = match p.method {
+            Some(m) => format!(
+                "pinched at one point: a lobe of {} boundary vertices filled first ({}, {} faces) \
+                 and the two copies of the point joined",
+                p.lobe,
+                m.name(),
+                p.added_faces
+            ),
+            None => format!(
+                "pinched at one point: a lobe of {} boundary vertices closed by joining the two \
+                 copies of the point",
+                p.lobe
+            ),
+        };
+        // the hole through the joined point, or through what was left of the loop
+        // (a pinch nested in another's rest); else a loop closed by pinches alone
+        let on = |vs: &[VertexId]| vs.contains(&p.vertex) || p.rest.iter().any(|v| vs.contains(v));
+        let at = holes
+            .iter()
+            .position(|h| on(&h.vertices))
+            .or_else(|| own.iter().find(|(_, vs)| on(vs)).map(|(i, _)| *i));
+        let rep = match at {
+            Some(i) => &mut out[i],
+            None => {
+                let mut lp = vec![p.vertex];
+                lp.extend(p.rest.iter().copied());
+                own.push((out.len(), lp.clone()));
+                let hole = Hole::new(out.len(), mesh, lp, policy);
+                let mut rep = hole.report(HoleStatus::Filled, String::new());
+                rep.method = p.method;
+                let end = mesh.num_faces() as u32;
+                traces.push(HoleTrace {
+                    boundary: hole.vertices.iter().map(|v| v.0).collect(),
+                    patch: end..end,
+                });
+                out.push(rep);
+                out.last_mut().expect("pushed")
+            }
+        };
+        rep.added_vertices += p.added_vertices;
+        rep.added_faces += p.added_faces;
+        if rep.method.is_none() && rep.status == HoleStatus::Filled {
+            rep.method = p.method;
+        }
+        rep.reason = if rep.reason.is_empty() {
+            what
+        } else {
+            format!("{}; {what}", rep.reason)
+        };
+    }
 }
 
 /// The holes of the mesh as it is, the border rule's reason for each loop it skips,

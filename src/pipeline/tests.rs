@@ -411,3 +411,40 @@ fn floating_debris_is_removed_by_policy_only() {
     assert_eq!(rep.summary.filled, 3);
     assert_eq!(rep.summary.skipped, 0);
 }
+
+/// Three square holes of a grid in a diagonal chain, touching at two corners: one loop
+/// of 12 pinched at two vertices (each split by the builder). The lobes are filled
+/// first and the copies joined, so the chain closes as holes of its own, with no
+/// failure, one log entry naming the pinches, and a sound output whose only open
+/// loop is the grid's border.
+#[test]
+fn a_loop_pinched_at_two_vertices_is_closed() {
+    let raw = crate::testutil::cells_removed(crate::testutil::unit_grid(8), |i, j| {
+        i == j && (2..=4).contains(&i)
+    });
+    let (out, rep) = repair(&raw, &Policy::default()).unwrap();
+    assert_eq!(rep.summary.failed, 0, "{:#?}", rep.holes);
+    assert_eq!(rep.summary.skipped, 1, "the border: {:#?}", rep.holes);
+    let pinched: Vec<_> = rep
+        .holes
+        .iter()
+        .filter(|h| h.reason.contains("pinched at one point"))
+        .collect();
+    assert_eq!(pinched.len(), 1, "{:#?}", rep.holes);
+    assert_eq!(pinched[0].status, HoleStatus::Filled);
+    assert_eq!(pinched[0].reason.matches("pinched").count(), 2);
+    assert_sound(&raw, &out, &rep);
+    let (m, _) = Mesh::from_raw(&out);
+    assert_eq!(
+        m.topo.boundary_loops().len(),
+        1,
+        "only the border left open"
+    );
+    // every cell of the three holes is covered: the patch areas add up
+    let area = |f: &[u32; 3]| {
+        let p = f.map(|v| out.positions[v as usize]);
+        (p[1] - p[0]).cross(p[2] - p[0]).length() / 2.0
+    };
+    let total: f64 = out.faces.iter().map(area).sum();
+    assert!((total - 64.0).abs() < 1e-9, "area {total}");
+}

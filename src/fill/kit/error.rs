@@ -74,6 +74,12 @@ pub enum Cause {
     /// A variant that would repeat the policy's run, whose patch failed the checks.
     #[error("the same front as the policy's, whose patch failed the checks")]
     SameAsPolicy,
+    /// A variant of a self-checked method not run: two variants before it made patches
+    /// that failed at a triangle on the same loop edge (a sliver or a crossing forced by
+    /// the rim there; measured on a folded photogrammetry rim: every variant failed the
+    /// same way), which the rim trimming of the dispatcher mends, not other settings.
+    #[error("skipped: two variants failed at the same loop edge ({0}, {1})")]
+    SameRimFailure(usize, usize),
     /// Every variant of a self-checked method failed (see
     /// [`crate::fill::kit::retry`]), each for its reason.
     #[error("{}", variants_text(.0))]
