@@ -21,7 +21,6 @@
 
 use crate::check::Checker;
 use crate::fill::dispatch;
-use crate::io::RawMesh;
 use crate::mesh::{Mesh, VertexId};
 use crate::patch::{apply_patch, Hole};
 use crate::policy::{Method, Policy};
@@ -200,28 +199,14 @@ fn one_round(
         Ok(i) => join[i].1,
         Err(_) => v,
     };
-    let raw = RawMesh {
-        positions: work.positions.clone(),
-        colors: work.colors.clone(),
-        faces: work
-            .topo
-            .faces()
-            .iter()
-            .map(|f| f.map(|v| map(v).0))
-            .collect(),
-        ..Default::default()
-    };
-    let (mut m, rep) = Mesh::from_raw(&raw);
     // the builder must find nothing to resolve but the copies joined away
-    let clean = crate::mesh::BuildReport {
-        isolated_vertices: rep.isolated_vertices,
-        ..Default::default()
-    };
-    if rep != clean || m.num_faces() != work.num_faces() {
-        return None;
-    }
-    m.origin.clone_from(&work.origin);
-    m.input_vertices = work.input_vertices;
+    let faces = work
+        .topo
+        .faces()
+        .iter()
+        .map(|f| f.map(|v| map(v).0))
+        .collect();
+    let m = super::stitch::rebuild_clean(&work, faces)?;
     // the loops still open after the round (the rest of each, renamed)
     let rest_loops = rest_loops
         .into_iter()
@@ -240,6 +225,7 @@ fn one_round(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::io::RawMesh;
     use crate::testutil::{cells_removed, unit_grid};
 
     /// A flat grid with two square holes that touch at one corner: the builder splits

@@ -260,24 +260,7 @@ pub fn stitch(mesh: &Mesh, tolerance: f64) -> Option<Stitched> {
         .iter()
         .filter(|&&(v, r)| is_active(r) && v.0 != r)
         .count();
-    let raw = RawMesh {
-        positions: mesh.positions.clone(),
-        colors: mesh.colors.clone(),
-        faces,
-        ..Default::default()
-    };
-    let (mut m, rep) = Mesh::from_raw(&raw);
-    // the builder must find nothing to resolve (isolated vertices aside: the ones
-    // identified away)
-    let clean = crate::mesh::BuildReport {
-        isolated_vertices: rep.isolated_vertices,
-        ..Default::default()
-    };
-    if rep != clean || m.num_faces() != mesh.num_faces() {
-        return None;
-    }
-    m.origin.clone_from(&mesh.origin);
-    m.input_vertices = mesh.input_vertices;
+    let m = rebuild_clean(mesh, faces)?;
     let closed = loops
         .into_iter()
         .filter_map(|lp| {
@@ -295,6 +278,31 @@ pub fn stitch(mesh: &Mesh, tolerance: f64) -> Option<Stitched> {
         faces_changed,
         closed,
     })
+}
+
+/// `mesh` with its faces replaced by `faces` (vertices identified: some renamed to
+/// others at the same place), the origins and input count carried over. `None` unless
+/// the builder finds nothing to resolve but the vertices identified away (isolated)
+/// and keeps every face.
+pub(super) fn rebuild_clean(mesh: &Mesh, faces: Vec<[u32; 3]>) -> Option<Mesh> {
+    let n = faces.len();
+    let raw = RawMesh {
+        positions: mesh.positions.clone(),
+        colors: mesh.colors.clone(),
+        faces,
+        ..Default::default()
+    };
+    let (mut m, rep) = Mesh::from_raw(&raw);
+    let clean = crate::mesh::BuildReport {
+        isolated_vertices: rep.isolated_vertices,
+        ..Default::default()
+    };
+    if rep != clean || m.num_faces() != n {
+        return None;
+    }
+    m.origin.clone_from(&mesh.origin);
+    m.input_vertices = mesh.input_vertices;
+    Some(m)
 }
 
 #[cfg(test)]
