@@ -11,10 +11,12 @@
 //! intersections with itself and the mesh). The dispatcher checks the result again.
 //! With the policy's settings passing (most holes), the result is the same as without
 //! this wrapper; the list is fixed, so the output stays deterministic. Once two
-//! variants have failed at a triangle on the same loop edge, the rest are skipped: the
-//! rim forces that failure (on the public photogrammetry vase, all seven wavefront
-//! variants failed at one sliver on one loop edge, 1.1 s), and the dispatcher's rim
-//! trimming is what mends it.
+//! variants have failed at a triangle on the same loop edge, the rest that only change
+//! settings are skipped: the rim forces that failure (on the public photogrammetry
+//! vase, all seven wavefront variants failed at one sliver on one loop edge, 1.1 s),
+//! and the dispatcher's rim trimming is what mends it. Variants that build the patch
+//! differently are still run (on `bunny-res2` the wavefront's residual-closing variant
+//! passes where four full fronts meet one mesh face).
 
 use super::relax::{relax_checked, RELAX_STEP};
 use super::{Cause, FillContext, FillError, VariantFailure, VariantWhy};
@@ -47,6 +49,19 @@ pub fn first_passing_at(
     variants: &[(&'static str, Policy)],
     run: impl Fn(usize, &FillContext) -> Result<Patch, FillError>,
 ) -> Result<(Patch, Option<PatchQuality>), FillError> {
+    first_passing_unless(ctx, variants, |_| true, run)
+}
+
+/// [`first_passing_at`], where only the variants for which `settings_only` holds
+/// (the same construction under other settings) are skipped after two failures at
+/// one loop edge; the others (a construction that ends differently, such as the
+/// wavefront's residual-closing ones) are still run.
+pub fn first_passing_unless(
+    ctx: &FillContext,
+    variants: &[(&'static str, Policy)],
+    settings_only: impl Fn(usize) -> bool,
+    run: impl Fn(usize, &FillContext) -> Result<Patch, FillError>,
+) -> Result<(Patch, Option<PatchQuality>), FillError> {
     // the dispatcher's checker when there is one; else one built on first use
     let mut own: Option<Checker> = None;
     let mut reasons: Vec<VariantFailure> = Vec::new();
@@ -54,7 +69,7 @@ pub fn first_passing_at(
     let mut failed_at: Vec<(usize, usize)> = Vec::new();
     for (at, (name, pol)) in variants.iter().enumerate() {
         ctx.deadline.check()?;
-        if let Some((a, b)) = repeated(&failed_at) {
+        if let Some((a, b)) = repeated(&failed_at).filter(|_| settings_only(at)) {
             reasons.push(VariantFailure {
                 name,
                 why: VariantWhy::Failed(Box::new(FillError::Failed(Cause::SameRimFailure(a, b)))),

@@ -186,7 +186,13 @@ pub fn fill_checked(ctx: &FillContext) -> Result<(Patch, Option<PatchQuality>), 
         .collect();
     let caps: Vec<usize> = resumable.iter().flatten().copied().collect();
     let first = std::cell::RefCell::new(FirstRun::default());
-    retry::first_passing_at(ctx, &vars, |at, c| {
+    // after two failures at one loop edge, the full-front variants are skipped, not
+    // those that close a residual early (see [`retry`])
+    let full_front = |at: usize| {
+        vars.get(at)
+            .is_some_and(|(_, p)| p.wavefront.max_steps_per_vertex >= full)
+    };
+    retry::first_passing_unless(ctx, &vars, full_front, |at, c| {
         if ran_away.get() && c.policy.wavefront.max_steps_per_vertex >= full {
             return Err(FillError::Failed(Cause::SkippedAfterRunaway));
         }
