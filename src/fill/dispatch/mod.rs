@@ -25,8 +25,8 @@ pub fn run_method(method: Method, ctx: &FillContext) -> Result<Patch, FillError>
 }
 
 /// Runs one method; with the patch, the quality of the checks it already passed
-/// inside the method (the self-checked methods `wavefront`, `hpde` and
-/// `lssvm_poisson` relax and check their patch with the dispatcher's checker, see
+/// inside the method (the self-checked methods `min_area_fair`, `wavefront`, `hpde`
+/// and `lssvm_poisson` relax and check their patch with the dispatcher's checker, see
 /// [`crate::fill::kit::retry`]), or `None` when the dispatcher must relax and check it.
 pub fn run_method_checked(
     method: Method,
@@ -34,7 +34,7 @@ pub fn run_method_checked(
 ) -> Result<(Patch, Option<PatchQuality>), FillError> {
     match method {
         Method::Fan => fan::fill(ctx).map(|p| (p, None)),
-        Method::MinAreaFair => min_area_fair::fill(ctx).map(|p| (p, None)),
+        Method::MinAreaFair => min_area_fair::fill_checked(ctx),
         Method::AdvancingFront => advancing_front::fill(ctx).map(|p| (p, None)),
         Method::LssvmPoisson => lssvm_poisson::fill_checked(ctx),
         Method::Wavefront => wavefront::fill_checked(ctx),

@@ -451,3 +451,24 @@ fn huge_sphere_hole_gets_a_graded_patch_near_the_sphere() {
     assert!(mean < 0.008, "mean radial error {mean}");
     assert!(max < 0.025, "max radial error {max}");
 }
+
+/// The self-checked fill returns a patch that passes the dispatcher's checks, with the
+/// quality of those checks (so the dispatcher need not check it again), and its
+/// variants are the policy and the other triangulation weight.
+#[test]
+fn the_self_checked_fill_returns_a_checked_patch() {
+    let (mesh, hole, policy) = sphere_case(4, 20.0);
+    let ctx = FillContext::new(&mesh, &hole, &policy);
+    let (patch, q) = super::fill_checked(&ctx).unwrap();
+    let checker = crate::check::Checker::new(&mesh);
+    let want = checker
+        .check_patch(&mesh, &hole.vertices, &patch, &policy.checks)
+        .unwrap();
+    assert_eq!(q, Some(want));
+    let (mean, _) = sphere_error(&patch, 10.0);
+    assert!(mean < 0.002, "mean radial error {mean}");
+    let v = variants(&policy);
+    assert_eq!(v.len(), 2);
+    assert_eq!(v[0].1.refine.weight, TriangulationWeight::Area);
+    assert_eq!(v[1].1.refine.weight, TriangulationWeight::DihedralArea);
+}
