@@ -236,6 +236,7 @@ mod tests {
             policy: &policy,
             deadline: Deadline::none(),
             checker: Some(&checker),
+            rim_bound: false,
         };
         let (patch, q) = fill_checked(&ctx).unwrap();
         assert!(patch.new_vertices.is_empty());

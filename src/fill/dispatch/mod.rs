@@ -65,14 +65,17 @@ pub struct Proposal {
 }
 
 /// One method on one hole: run it, relax the patch tangentially, check it. `Ok` holds
-/// the checked patch and its quality; `Err` the attempt that failed.
+/// the checked patch and its quality; `Err` the attempt that failed, and whether the
+/// method stopped its variants at a repeated loop edge (see
+/// [`FillContext::rim_bound`], which `rim_bound` sets for this method).
 fn attempt(
     method: Method,
     mesh: &Mesh,
     hole: &Hole,
     policy: &Policy,
     checker: &Checker,
-) -> Result<(Patch, PatchQuality, f64), Attempt> {
+    rim_bound: bool,
+) -> Result<(Patch, PatchQuality, f64), (Attempt, bool)> {
     let ta = Instant::now();
     let ctx = FillContext {
         mesh,
@@ -80,6 +83,7 @@ fn attempt(
         policy,
         deadline: Deadline::after_ms(policy.limits.hole_time_ms),
         checker: Some(checker),
+        rim_bound,
     };
     let failed = |outcome, reason: String| Attempt {
         method,
@@ -107,12 +111,20 @@ fn attempt(
         Ok((p, Some(q))) => return Ok((p, q, ms_since(ta))),
         Ok((p, None)) => p,
         Err(FillError::Timeout) => {
-            return Err(failed(
-                Outcome::Timeout,
-                format!("time limit of {} ms reached", policy.limits.hole_time_ms),
+            return Err((
+                failed(
+                    Outcome::Timeout,
+                    format!("time limit of {} ms reached", policy.limits.hole_time_ms),
+                ),
+                false,
             ))
         }
-        Err(why) => return Err(failed(Outcome::Error, why.to_string())),
+        Err(why) => {
+            return Err((
+                failed(Outcome::Error, why.to_string()),
+                why.stopped_at_rim(),
+            ))
+        }
     };
     // even out the triangles tangentially; keep that only if it passes the checks
     if let Some((relaxed, q)) = relax::relax_checked(
@@ -127,7 +139,7 @@ fn attempt(
     }
     match checker.check_patch(mesh, &hole.vertices, &patch, &policy.checks) {
         Ok(q) => Ok((patch, q, ms_since(ta))),
-        Err(why) => Err(failed(Outcome::Rejected, why.to_string())),
+        Err(why) => Err((failed(Outcome::Rejected, why.to_string()), false)),
     }
 }
 
@@ -143,13 +155,14 @@ pub fn propose(
 ) -> Proposal {
     let t0 = Instant::now();
     let mut tried = Vec::new();
+    let mut rim_bound = false;
     if hole.len() >= 3 {
         for (i, &method) in methods_for(policy, hole.class)
             .iter()
             .enumerate()
             .skip(from)
         {
-            match attempt(method, mesh, hole, policy, checker) {
+            match attempt(method, mesh, hole, policy, checker, rim_bound) {
                 Ok((patch, q, ms)) => {
                     return Proposal {
                         tried,
@@ -157,7 +170,10 @@ pub fn propose(
                         ms: ms_since(t0),
                     }
                 }
-                Err(a) => tried.push(a),
+                Err((a, at_rim)) => {
+                    rim_bound |= at_rim;
+                    tried.push(a);
+                }
             }
         }
     }

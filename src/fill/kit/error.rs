@@ -80,6 +80,10 @@ pub enum Cause {
     /// same way), which the rim trimming of the dispatcher mends, not other settings.
     #[error("skipped: two variants failed at the same loop edge ({0}, {1})")]
     SameRimFailure(usize, usize),
+    /// A variant of a self-checked method not run: an earlier method of the hole's
+    /// list stopped its variants at a repeated loop edge ([`Cause::SameRimFailure`]).
+    #[error("skipped: an earlier method failed twice at one loop edge")]
+    RimBound,
     /// Every variant of a self-checked method failed (see
     /// [`crate::fill::kit::retry`]), each for its reason.
     #[error("{}", variants_text(.0))]
@@ -114,6 +118,14 @@ fn variants_text(v: &[VariantFailure]) -> String {
 }
 
 impl FillError {
+    /// Whether a self-checked method stopped its variants at a repeated loop edge
+    /// ([`Cause::SameRimFailure`] among its variants' failures).
+    pub fn stopped_at_rim(&self) -> bool {
+        matches!(self, FillError::Failed(Cause::Variants(v)) if v.iter().any(|f| matches!(
+            &f.why,
+            VariantWhy::Failed(e) if matches!(**e, FillError::Failed(Cause::SameRimFailure(..)))
+        )))
+    }
     /// [`Cause::Loop`].
     pub fn bad_loop(why: impl Into<String>) -> FillError {
         FillError::Failed(Cause::Loop(why.into()))
@@ -136,6 +148,36 @@ impl FillError {
 mod tests {
     use super::*;
     use crate::check::{CheckFailure, Meets};
+
+    /// Only a variant stopped at a repeated loop edge marks the hole's rim as the cause
+    /// (the dispatcher's `rim_bound`), not another failure, nor a skip for that reason.
+    #[test]
+    fn a_stop_at_a_repeated_loop_edge_is_found_among_the_variants() {
+        let failed = |c: Cause| VariantFailure {
+            name: "v",
+            why: VariantWhy::Failed(Box::new(FillError::Failed(c))),
+        };
+        let rejected = VariantFailure {
+            name: "policy",
+            why: VariantWhy::Rejected(CheckFailure::SelfIntersection {
+                triangle: 0,
+                meets: Meets::MeshFace(1),
+            }),
+        };
+        let stopped = FillError::Failed(Cause::Variants(vec![
+            rejected.clone(),
+            failed(Cause::SameRimFailure(3, 4)),
+        ]));
+        assert!(stopped.stopped_at_rim());
+        let other = FillError::Failed(Cause::Variants(vec![
+            rejected,
+            failed(Cause::RimBound),
+            failed(Cause::SkippedAfterRunaway),
+        ]));
+        assert!(!other.stopped_at_rim());
+        assert!(!FillError::Failed(Cause::SameRimFailure(3, 4)).stopped_at_rim());
+        assert!(!FillError::Timeout.stopped_at_rim());
+    }
 
     #[test]
     fn messages_are_the_logs_wording() {

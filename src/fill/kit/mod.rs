@@ -59,6 +59,11 @@ pub struct FillContext<'a> {
     /// The dispatcher's checks over `mesh`, for a method that checks its own patch
     /// (`None`: the method builds its own, which costs a tree over the whole mesh).
     pub checker: Option<&'a Checker>,
+    /// An earlier method of the hole's list stopped its variants at a loop edge where
+    /// two of them had failed (the rim forces that failure, see [`retry`]): a
+    /// self-checked method then runs its first variant only, with its local repairs,
+    /// and leaves the rest to the rim trimming.
+    pub rim_bound: bool,
 }
 
 impl FillContext<'_> {
@@ -85,6 +90,7 @@ impl<'a> FillContext<'a> {
             policy,
             deadline: Deadline::none(),
             checker: None,
+            rim_bound: false,
         }
     }
 }

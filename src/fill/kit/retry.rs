@@ -16,7 +16,10 @@
 //! vase, all seven wavefront variants failed at one sliver on one loop edge, 1.1 s),
 //! and the dispatcher's rim trimming is what mends it. Variants that build the patch
 //! differently are still run (on `bunny-res2` the wavefront's residual-closing variant
-//! passes where four full fronts meet one mesh face).
+//! passes where four full fronts meet one mesh face). After a method of the hole's
+//! list has stopped that way, the later ones run their first variant only
+//! ([`FillContext::rim_bound`]: on that vase hole, `min_area_fair`'s second weight
+//! failed too, 80 ms).
 
 use super::relax::{relax_checked, RELAX_STEP};
 use super::{Cause, FillContext, FillError, VariantFailure, VariantWhy};
@@ -69,10 +72,15 @@ pub fn first_passing_unless(
     let mut failed_at: Vec<(usize, usize)> = Vec::new();
     for (at, (name, pol)) in variants.iter().enumerate() {
         ctx.deadline.check()?;
-        if let Some((a, b)) = repeated(&failed_at).filter(|_| settings_only(at)) {
+        let edge = match repeated(&failed_at) {
+            Some(e) if settings_only(at) => Some(Cause::SameRimFailure(e.0, e.1)),
+            _ if at > 0 && ctx.rim_bound => Some(Cause::RimBound),
+            _ => None,
+        };
+        if let Some(cause) = edge {
             reasons.push(VariantFailure {
                 name,
-                why: VariantWhy::Failed(Box::new(FillError::Failed(Cause::SameRimFailure(a, b)))),
+                why: VariantWhy::Failed(Box::new(FillError::Failed(cause))),
             });
             continue;
         }
@@ -82,6 +90,7 @@ pub fn first_passing_unless(
             policy: pol,
             deadline: ctx.deadline,
             checker: ctx.checker,
+            rim_bound: ctx.rim_bound,
         };
         let t = std::time::Instant::now();
         let made = run(at, &sub);

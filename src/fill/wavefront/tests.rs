@@ -697,6 +697,7 @@ fn a_resumed_run_equals_a_fresh_one() {
         policy,
         deadline: Deadline::none(),
         checker: None,
+        rim_bound: false,
     };
     let mut short = policy.clone();
     short = short
