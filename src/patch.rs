@@ -43,6 +43,7 @@ impl Hole {
             island_faces_removed: 0,
             islands_bridged: 0,
             quality: None,
+            selection: None,
             ms: 0.0,
         }
     }

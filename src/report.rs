@@ -74,6 +74,37 @@ pub struct PatchQuality {
     pub valence6_share: Option<f64>,
 }
 
+/// The self-validation of one hole (`select.mode = "validate"`): the hole grown by
+/// `rings` rings of input faces, each candidate's patch of the grown hole measured
+/// against the removed faces.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct Selection {
+    pub rings: usize,
+    /// Boundary vertices of the grown hole (0 when it could not be grown).
+    pub grown_boundary_vertices: usize,
+    /// Known points the candidates were measured against: the removed faces' vertices
+    /// inside the grown hole and their centroids.
+    pub known_points: usize,
+    pub candidates: Vec<Candidate>,
+    /// The candidate put first; `None` keeps the list's order (see `reason`).
+    pub winner: Option<Method>,
+    /// Why there is no winner (empty when there is one).
+    pub reason: String,
+    pub ms: f64,
+}
+
+/// One candidate of a [`Selection`].
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct Candidate {
+    pub method: Method,
+    /// Mean distance from the known points to the candidate's patch of the grown hole,
+    /// per mille of the mesh's bounding-box diagonal; `None` when it made no patch.
+    pub score: Option<f64>,
+    /// Why it made no patch (empty when it did).
+    pub reason: String,
+    pub ms: f64,
+}
+
 /// One hole.
 #[derive(Clone, Debug, Serialize, PartialEq)]
 pub struct HoleReport {
@@ -99,6 +130,10 @@ pub struct HoleReport {
     /// in `added_faces`) and filled with it.
     pub islands_bridged: usize,
     pub quality: Option<PatchQuality>,
+    /// The per-hole choice of method, when `select.mode = "validate"` compared
+    /// candidates (absent otherwise).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub selection: Option<Selection>,
     pub ms: f64,
 }
 

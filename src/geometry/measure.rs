@@ -172,6 +172,68 @@ pub fn point_in_polygon(poly: &[DVec2], q: DVec2) -> bool {
     c
 }
 
+/// The point of triangle `abc` closest to `p` (Ericson, Real-Time Collision
+/// Detection, §5.1.5: the Voronoi region of a corner, an edge or the face). A
+/// degenerate triangle gives a point of one of its edges.
+pub fn closest_point_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> DVec3 {
+    let ab = b - a;
+    let ac = c - a;
+    let ap = p - a;
+    let d1 = ab.dot(ap);
+    let d2 = ac.dot(ap);
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return a;
+    }
+    let bp = p - b;
+    let d3 = ab.dot(bp);
+    let d4 = ac.dot(bp);
+    if d3 >= 0.0 && d4 <= d3 {
+        return b;
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        return a + ab * (d1 / (d1 - d3));
+    }
+    let cp = p - c;
+    let d5 = ab.dot(cp);
+    let d6 = ac.dot(cp);
+    if d6 >= 0.0 && d5 <= d6 {
+        return c;
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        return a + ac * (d2 / (d2 - d6));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+    }
+    let denom = va + vb + vc;
+    if denom.abs() < f64::MIN_POSITIVE {
+        // degenerate: the nearest of the three edges
+        let on = |s: DVec3, e: DVec3| {
+            let d = e - s;
+            let t = if d.length_squared() > 0.0 {
+                ((p - s).dot(d) / d.length_squared()).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            s + d * t
+        };
+        return [on(a, b), on(b, c), on(c, a)]
+            .into_iter()
+            .min_by(|x, y| {
+                (*x - p)
+                    .length_squared()
+                    .total_cmp(&(*y - p).length_squared())
+            })
+            .unwrap_or(a);
+    }
+    let v = vb / denom;
+    let w = vc / denom;
+    a + ab * v + ac * w
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -207,5 +269,40 @@ mod tests {
     fn degenerate_quality_is_zero() {
         let a = DVec3::ZERO;
         assert_eq!(quality(a, DVec3::X, DVec3::X * 2.0), 0.0);
+    }
+
+    #[test]
+    fn closest_points_on_a_triangle_against_a_dense_sampling() {
+        let (a, b, c) = (
+            DVec3::ZERO,
+            DVec3::new(2.0, 0.0, 0.0),
+            DVec3::new(0.5, 1.5, 0.3),
+        );
+        let mut rng_state = 7u64;
+        let mut r = || {
+            rng_state = rng_state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((rng_state >> 11) as f64 / (1u64 << 53) as f64) * 6.0 - 3.0
+        };
+        for _ in 0..200 {
+            let p = DVec3::new(r(), r(), r());
+            let q = closest_point_on_triangle(p, a, b, c);
+            // the oracle: the nearest of a fine barycentric grid
+            let n = 200;
+            let mut best = f64::INFINITY;
+            for i in 0..=n {
+                for j in 0..=(n - i) {
+                    let (u, v) = (i as f64 / n as f64, j as f64 / n as f64);
+                    let s = a + (b - a) * u + (c - a) * v;
+                    best = best.min((s - p).length());
+                }
+            }
+            let d = (q - p).length();
+            assert!(d <= best + 1e-12 && d > best - 0.02, "{p}: {d} vs {best}");
+        }
+        // a degenerate triangle: the nearest point of its segment
+        let q = closest_point_on_triangle(DVec3::new(1.0, 1.0, 0.0), a, b, b * 0.5);
+        assert!((q - DVec3::new(1.0, 0.0, 0.0)).length() < 1e-12, "{q}");
     }
 }

@@ -166,11 +166,11 @@ fn one_round(
         };
         if lobe.len() >= 3 {
             let hole = Hole::new(0, mesh, lobe, policy);
-            let proposal = dispatch::propose(mesh, &hole, policy, &checker, 0);
+            let proposal = dispatch::propose(mesh, &hole, policy, &checker);
+            let methods = proposal.order;
             let Some((m, patch, _, _)) = proposal.accepted else {
                 continue;
             };
-            let methods = dispatch::methods_for(policy, hole.class);
             if checker
                 .check_against_added(&work, &hole.vertices, &patch, &policy.checks)
                 .is_err()

@@ -82,6 +82,7 @@ pub struct Settings {
     /// Seed of every random choice (same input + policy = same output).
     pub seed: u64,
     pub dispatch: Dispatch,
+    pub select: Select,
     pub border: Border,
     pub clean: Clean,
     pub rim: Rim,

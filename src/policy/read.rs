@@ -22,6 +22,7 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
         "dispatch",
         &["small_max", "middle_max", "small", "middle", "large"],
     ),
+    ("select", &["mode", "rings", "methods"]),
     (
         "border",
         &[
@@ -340,6 +341,9 @@ impl Reader<'_> {
             ("border", "only_longest") => p.border.only_longest = self.boolean(key, v)?,
             ("clean", "remove_teeth") => p.clean.remove_teeth = self.boolean(key, v)?,
             ("clean", "split_long_edges") => p.clean.split_long_edges = self.float(key, v)?,
+            ("select", "mode") => p.select.mode = self.named(key, v)?,
+            ("select", "rings") => p.select.rings = self.usize(key, v)?,
+            ("select", "methods") => p.select.methods = self.methods(key, v)?,
             ("rim", "trim") => p.rim.trim = self.boolean(key, v)?,
             ("rim", "max_rings") => p.rim.max_rings = self.usize(key, v)?,
             ("rim", "max_faces") => p.rim.max_faces = self.usize(key, v)?,

@@ -39,6 +39,40 @@ impl Default for Dispatch {
     }
 }
 
+/// How the method for a hole is chosen among its class's list.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum SelectMode {
+    /// The list's order: the first method whose patch passes the checks.
+    First,
+    /// Self-validation: the hole is grown by `select.rings` rings of known surface,
+    /// each candidate fills the grown hole, and the one whose patch passes closest to
+    /// the removed known surface goes first (the rest keep the list's order).
+    Validate,
+}
+
+/// Per-hole choice of method (`[select]`).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct Select {
+    pub mode: SelectMode,
+    /// Rings of input faces around the hole removed for the self-validation.
+    pub rings: usize,
+    /// The candidates: the methods of a hole's list that are also here, when at least
+    /// two are.
+    pub methods: Vec<Method>,
+}
+
+impl Default for Select {
+    fn default() -> Self {
+        Select {
+            mode: SelectMode::First,
+            rings: 2,
+            methods: vec![Method::Wavefront, Method::MinAreaFair],
+        }
+    }
+}
+
 /// Which boundary loops are the outer border of an open scan (skipped, not filled).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
@@ -557,6 +591,16 @@ impl PolicyName for SmoothScope {
         match self {
             SmoothScope::Whole => "whole",
             SmoothScope::Rings => "rings",
+        }
+    }
+}
+
+impl PolicyName for SelectMode {
+    const VALUES: &'static [SelectMode] = &[SelectMode::First, SelectMode::Validate];
+    fn policy_name(self) -> &'static str {
+        match self {
+            SelectMode::First => "first",
+            SelectMode::Validate => "validate",
         }
     }
 }

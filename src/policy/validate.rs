@@ -2,7 +2,7 @@
 //! A violation names the key (and, for a rule between two keys, says it from either).
 
 use super::{
-    Lssvm, Settings, SmoothScope, MAX_FULL_SEARCH, MAX_HOLE_TIME_MS, MAX_HPDE_GENERATIONS,
+    Lssvm, Method, Settings, SmoothScope, MAX_FULL_SEARCH, MAX_HOLE_TIME_MS, MAX_HPDE_GENERATIONS,
     MAX_HPDE_POPULATION_FACTOR, MAX_PATCH_TRIANGLES, MAX_SMOOTH_ITERATIONS, MAX_THREADS,
     MIN_PATCH_TRIANGLES,
 };
@@ -81,6 +81,31 @@ impl Settings {
                         format!("lists method `{}` more than once", m.name()),
                     ));
                 }
+            }
+        }
+
+        let sel = &self.select;
+        if !(1..=8).contains(&sel.rings) {
+            return Err(Invalid::new(
+                "select.rings",
+                format!("must be between 1 and 8 (got {})", sel.rings),
+            ));
+        }
+        for (i, m) in sel.methods.iter().enumerate() {
+            if sel.methods[..i].contains(m) {
+                return Err(Invalid::new(
+                    "select.methods",
+                    format!("lists method `{}` more than once", m.name()),
+                ));
+            }
+            if matches!(m, Method::Close | Method::Fan) {
+                return Err(Invalid::new(
+                    "select.methods",
+                    format!(
+                        "`{}` cannot be a candidate: it adds no vertex, so it can only be a fallback",
+                        m.name()
+                    ),
+                ));
             }
         }
 

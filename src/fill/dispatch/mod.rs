@@ -9,6 +9,7 @@
 
 pub mod parallel;
 pub mod rim;
+pub mod select;
 
 use super::kit::{relax, Deadline, FillContext, FillError};
 use super::{advancing_front, close, fan, hpde, lssvm_poisson, min_area_fair, wavefront};
@@ -16,7 +17,7 @@ use crate::check::Checker;
 use crate::mesh::Mesh;
 use crate::patch::{apply_patch, Hole, Patch};
 use crate::policy::{Method, Policy};
-use crate::report::{Attempt, HoleClass, HoleReport, HoleStatus, Outcome, PatchQuality};
+use crate::report::{Attempt, HoleClass, HoleReport, HoleStatus, Outcome, PatchQuality, Selection};
 use std::time::Instant;
 
 /// Runs one method.
@@ -52,13 +53,19 @@ pub fn methods_for(policy: &Policy, class: HoleClass) -> &[Method] {
     }
 }
 
-/// What the first phase of [`fill_hole`] found for one hole: every attempt so far and,
-/// if one passed the checks against the mesh as it was, that patch.
+/// What the first phase of [`fill_hole`] found for one hole: the order of its methods,
+/// every attempt so far and, if one passed the checks against the mesh as it was, that
+/// patch.
 #[derive(Clone, Debug)]
 pub struct Proposal {
+    /// The class's methods in the order they are tried: the list's order, or the
+    /// self-validation's winner first ([`select`]).
+    pub order: Vec<Method>,
+    /// The self-validation that chose `order`, when the policy asks for one.
+    pub selection: Option<Selection>,
     /// Attempts that failed or were rejected, in order.
     pub tried: Vec<Attempt>,
-    /// The accepted attempt: index in the class's method list, patch, quality, ms.
+    /// The accepted attempt: index in `order`, patch, quality, ms.
     pub accepted: Option<(usize, Patch, PatchQuality, f64)>,
     /// Time spent, in milliseconds.
     pub ms: f64,
@@ -143,28 +150,37 @@ fn attempt(
     }
 }
 
-/// First phase of filling a hole, read-only so that holes can run in parallel: tries
-/// the class's methods in order from `from` and stops at the first patch that passes
-/// every check against `mesh`.
-pub fn propose(
+/// First phase of filling a hole, read-only so that holes can run in parallel: orders
+/// the class's methods ([`select::order`]), tries them in that order and stops at the
+/// first patch that passes every check against `mesh`.
+pub fn propose(mesh: &Mesh, hole: &Hole, policy: &Policy, checker: &Checker) -> Proposal {
+    let t0 = Instant::now();
+    let (order, selection) = select::order(mesh, hole, policy, methods_for(policy, hole.class));
+    let mut p = propose_from(mesh, hole, policy, checker, order, 0);
+    p.selection = selection;
+    p.ms = ms_since(t0);
+    p
+}
+
+/// [`propose`] with a given order, from its `from`-th method.
+fn propose_from(
     mesh: &Mesh,
     hole: &Hole,
     policy: &Policy,
     checker: &Checker,
+    order: Vec<Method>,
     from: usize,
 ) -> Proposal {
     let t0 = Instant::now();
     let mut tried = Vec::new();
     let mut rim_bound = false;
     if hole.len() >= 3 {
-        for (i, &method) in methods_for(policy, hole.class)
-            .iter()
-            .enumerate()
-            .skip(from)
-        {
+        for (i, &method) in order.iter().enumerate().skip(from) {
             match attempt(method, mesh, hole, policy, checker, rim_bound) {
                 Ok((patch, q, ms)) => {
                     return Proposal {
+                        order,
+                        selection: None,
                         tried,
                         accepted: Some((i, patch, q, ms)),
                         ms: ms_since(t0),
@@ -178,6 +194,8 @@ pub fn propose(
         }
     }
     Proposal {
+        order,
+        selection: None,
         tried,
         accepted: None,
         ms: ms_since(t0),
@@ -198,6 +216,7 @@ pub fn finish_hole(
     let t0 = Instant::now();
     let mut rep = HoleReport {
         tried: proposal.tried,
+        selection: proposal.selection,
         ..hole.report(HoleStatus::Failed, String::new())
     };
     let done = |rep: &mut HoleReport| rep.ms = proposal.ms + ms_since(t0);
@@ -209,7 +228,7 @@ pub fn finish_hole(
         done(&mut rep);
         return rep;
     }
-    let methods = methods_for(policy, hole.class);
+    let methods = proposal.order;
     let mut next = Some(proposal.accepted);
     let mut from = methods.len();
     // the proposal first, then each later method with full checks
@@ -235,7 +254,7 @@ pub fn finish_hole(
                 if from >= methods.len() {
                     break;
                 }
-                let p = propose(mesh, hole, policy, checker, from);
+                let p = propose_from(mesh, hole, policy, checker, methods.clone(), from);
                 rep.tried.extend(p.tried);
                 from = methods.len();
                 p.accepted
@@ -292,7 +311,7 @@ pub fn fill_hole(
     policy: &Policy,
     checker: &mut Checker,
 ) -> HoleReport {
-    let proposal = propose(mesh, hole, policy, checker, 0);
+    let proposal = propose(mesh, hole, policy, checker);
     finish_hole(mesh, hole, policy, checker, proposal)
 }
 

@@ -75,7 +75,7 @@ pub fn propose_all(
     use std::sync::Mutex;
     let mut order: Vec<usize> = (0..holes.len()).filter(|&i| skip[i].is_none()).collect();
     order.sort_by_key(|&i| std::cmp::Reverse(holes[i].len()));
-    let run = |i: usize| propose(mesh, &holes[i], policy, checker, 0);
+    let run = |i: usize| propose(mesh, &holes[i], policy, checker);
     let threads = policy.limits.fill_threads().min(order.len() + 1);
     let next = AtomicUsize::new(0);
     let slots: Vec<Mutex<Option<Proposal>>> = order.iter().map(|_| Mutex::new(None)).collect();

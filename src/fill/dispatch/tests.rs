@@ -63,6 +63,8 @@ fn a_proposal_that_meets_an_earlier_patch_fails_over_to_the_next_method() {
     let methods = methods_for(&policy, low.class).to_vec();
     assert!(methods.len() >= 2);
     let proposal = Proposal {
+        order: methods.clone(),
+        selection: None,
         tried: Vec::new(),
         accepted: Some((0, tall, q, 0.0)),
         ms: 0.0,

@@ -1,0 +1,322 @@
+//! Per-hole choice of method by self-validation (`select.mode = "validate"`; not from
+//! the four papers, the "self-validation" of issue 19).
+//!
+//! No method is best on every hole, and the true surface of a hole is unknown; the
+//! surface around it is known. So the hole is grown by `select.rings` rings of input
+//! faces (the faces with a corner on the current loop, ring by ring), each candidate
+//! fills the grown hole on a copy of the surrounding surface (`CONTEXT_RINGS` more
+//! rings, so that a method sees the rim it would see on the real hole), and its patch
+//! is scored by the mean distance from the known points it replaced (the removed
+//! faces' vertices inside the grown hole, the original loop among them, and the
+//! removed faces' centroids) to the patch. The best-scoring candidate goes first on
+//! the real hole; the others keep the list's order, so the fallback chain is as before.
+//! A hole whose grown region is not a disk (it reaches another hole or the border, or
+//! wraps a handle) keeps the list's order, with the reason in the log.
+
+use super::attempt;
+use crate::check::Checker;
+use crate::geometry::bvh::{tri_box, Bvh};
+use crate::geometry::measure::closest_point_on_triangle;
+use crate::io::RawMesh;
+use crate::mesh::{FaceId, Mesh, VertexId};
+use crate::patch::{Hole, Patch};
+use crate::policy::{Method, Policy, SelectMode};
+use crate::report::{Candidate, Selection};
+use glam::DVec3;
+use std::collections::HashMap;
+use std::time::Instant;
+
+/// Rings of surface kept around the grown hole for the candidates to read (rim
+/// normals, the fairing's outer ring, the LS-SVM's fitting rings).
+const CONTEXT_RINGS: usize = 4;
+
+/// The order in which the methods of `methods` (the hole's class list) are tried on
+/// `hole`, and the selection that made it (`None` when the policy compares nothing
+/// for this hole: mode `first`, or fewer than two candidates in the list).
+pub fn order(
+    mesh: &Mesh,
+    hole: &Hole,
+    policy: &Policy,
+    methods: &[Method],
+) -> (Vec<Method>, Option<Selection>) {
+    let candidates: Vec<Method> = methods
+        .iter()
+        .copied()
+        .filter(|m| policy.select.methods.contains(m))
+        .collect();
+    if policy.select.mode == SelectMode::First || candidates.len() < 2 || hole.len() < 3 {
+        return (methods.to_vec(), None);
+    }
+    let sel = validate(mesh, hole, policy, &candidates);
+    let mut order = methods.to_vec();
+    if let Some(w) = sel.winner {
+        order.retain(|&m| m != w);
+        order.insert(0, w);
+    }
+    (order, Some(sel))
+}
+
+/// Grows `hole`, fills the grown hole with each candidate and scores it.
+pub fn validate(mesh: &Mesh, hole: &Hole, policy: &Policy, candidates: &[Method]) -> Selection {
+    let t0 = Instant::now();
+    let rings = policy.select.rings;
+    let mut sel = Selection {
+        rings,
+        grown_boundary_vertices: 0,
+        known_points: 0,
+        candidates: Vec::new(),
+        winner: None,
+        reason: String::new(),
+        ms: 0.0,
+    };
+    let grown = match Grown::new(mesh, hole, policy, rings) {
+        Ok(g) => g,
+        Err(why) => {
+            sel.reason = why;
+            sel.ms = ms_since(t0);
+            return sel;
+        }
+    };
+    sel.grown_boundary_vertices = grown.hole.len();
+    sel.known_points = grown.known.len();
+    let diag = mesh.bbox_diagonal().max(f64::MIN_POSITIVE);
+    let checker = Checker::new(&grown.mesh);
+    for &method in candidates {
+        let tc = Instant::now();
+        let c = match attempt(method, &grown.mesh, &grown.hole, policy, &checker, false) {
+            Ok((patch, _, _)) => Candidate {
+                method,
+                score: Some(1000.0 * grown.mean_distance(&patch) / diag),
+                reason: String::new(),
+                ms: ms_since(tc),
+            },
+            Err((a, _)) => Candidate {
+                method,
+                score: None,
+                reason: a.reason,
+                ms: ms_since(tc),
+            },
+        };
+        sel.candidates.push(c);
+    }
+    // the lowest score; on a tie the earlier candidate (the list's order)
+    let mut best: Option<(Method, f64)> = None;
+    for c in &sel.candidates {
+        if let Some(s) = c.score.filter(|s| s.is_finite()) {
+            if best.is_none_or(|(_, b)| s < b) {
+                best = Some((c.method, s));
+            }
+        }
+    }
+    match best {
+        Some((m, _)) => sel.winner = Some(m),
+        None => sel.reason = "no candidate filled the grown hole".into(),
+    }
+    sel.ms = ms_since(t0);
+    sel
+}
+
+/// A hole grown by some rings, on a copy of the surface around it.
+struct Grown {
+    /// The surrounding surface without the grown region (local vertex numbers).
+    mesh: Mesh,
+    /// The grown hole in `mesh`.
+    hole: Hole,
+    /// The known points the grown region held: vertices inside it and face centroids.
+    known: Vec<DVec3>,
+}
+
+impl Grown {
+    fn new(mesh: &Mesh, hole: &Hole, policy: &Policy, rings: usize) -> Result<Grown, String> {
+        let topo = &mesh.topo;
+        let mut on_hole = HashMap::with_capacity(hole.len());
+        for (i, &v) in hole.vertices.iter().enumerate() {
+            on_hole.insert(v, i);
+        }
+        // ring by ring: faces with a corner on the current frontier; `depth` of a
+        // vertex: the ring whose faces first reached it (0: the hole's loop)
+        let mut depth: HashMap<VertexId, usize> = hole.vertices.iter().map(|&v| (v, 0)).collect();
+        let mut face_ring: HashMap<FaceId, usize> = HashMap::new();
+        let mut frontier: Vec<VertexId> = hole.vertices.clone();
+        for r in 0..rings + CONTEXT_RINGS {
+            let mut next = Vec::new();
+            for &v in &frontier {
+                for f in topo.vertex_faces(v) {
+                    if face_ring.contains_key(&f) {
+                        continue;
+                    }
+                    face_ring.insert(f, r);
+                    for c in topo.face(f) {
+                        if !depth.contains_key(&c) {
+                            depth.insert(c, r + 1);
+                            next.push(c);
+                        }
+                    }
+                }
+            }
+            frontier = next;
+        }
+        // the grown region must not reach another boundary (hole or border): its
+        // faces' corners are all interior vertices or on this hole's loop
+        for (&f, &r) in &face_ring {
+            if r >= rings {
+                continue;
+            }
+            for c in topo.face(f) {
+                if !on_hole.contains_key(&c) && topo.is_boundary_vertex(c) {
+                    return Err(format!(
+                        "another hole or the border is within {rings} rings of this one"
+                    ));
+                }
+            }
+        }
+        // the local copy: context faces only, vertices renumbered in first-use order
+        let mut local_of: HashMap<VertexId, u32> = HashMap::new();
+        let mut positions = Vec::new();
+        let mut colors = mesh.colors.as_ref().map(|_| Vec::new());
+        let mut faces = Vec::new();
+        let mut kept: Vec<(FaceId, usize)> = face_ring.iter().map(|(&f, &r)| (f, r)).collect();
+        kept.sort_unstable_by_key(|&(f, _)| f.idx());
+        let mut known = Vec::new();
+        let mut local = |v: VertexId, positions: &mut Vec<DVec3>| -> u32 {
+            *local_of.entry(v).or_insert_with(|| {
+                positions.push(mesh.pos(v));
+                if let (Some(out), Some(src)) = (colors.as_mut(), mesh.colors.as_ref()) {
+                    out.push(src[v.idx()]);
+                }
+                (positions.len() - 1) as u32
+            })
+        };
+        for &(f, r) in &kept {
+            let [a, b, c] = topo.face(f);
+            if r < rings {
+                known.push((mesh.pos(a) + mesh.pos(b) + mesh.pos(c)) / 3.0);
+            } else {
+                faces.push([
+                    local(a, &mut positions),
+                    local(b, &mut positions),
+                    local(c, &mut positions),
+                ]);
+            }
+        }
+        // vertices inside the grown region: reached by its rings and on no kept face
+        for (&v, &d) in &depth {
+            if d <= rings && !local_of.contains_key(&v) {
+                known.push(mesh.pos(v));
+            }
+        }
+        let raw = RawMesh {
+            positions,
+            colors: colors.filter(|c| !c.is_empty()),
+            faces,
+            ..Default::default()
+        };
+        let (sub, _) = Mesh::from_raw(&raw);
+        // the grown loop: through the corners of the removed faces that are kept
+        let mut is_rim = vec![false; sub.num_vertices()];
+        for (&f, &r) in &face_ring {
+            if r < rings {
+                for c in topo.face(f) {
+                    if let Some(&l) = local_of.get(&c) {
+                        if let Some(x) = is_rim.get_mut(l as usize) {
+                            *x = true;
+                        }
+                    }
+                }
+            }
+        }
+        let rims = is_rim.iter().filter(|&&x| x).count();
+        let loops: Vec<Vec<VertexId>> = sub
+            .topo
+            .boundary_loops()
+            .into_iter()
+            .filter(|l| {
+                l.iter()
+                    .any(|v| is_rim.get(v.idx()).copied().unwrap_or(false))
+            })
+            .collect();
+        let [lp] = loops.as_slice() else {
+            return Err(format!(
+                "the region grown by {rings} rings is not a disk ({} boundary loops)",
+                loops.len()
+            ));
+        };
+        let on_loop = lp
+            .iter()
+            .filter(|v| is_rim.get(v.idx()).copied().unwrap_or(false))
+            .count();
+        if on_loop != rims || lp.len() < 3 {
+            return Err(format!(
+                "the region grown by {rings} rings is not a disk (its rim is not one simple loop)"
+            ));
+        }
+        if known.is_empty() {
+            return Err("the grown region holds no known point".into());
+        }
+        let grown = Hole::new(hole.id, &sub, lp.clone(), policy);
+        Ok(Grown {
+            mesh: sub,
+            hole: grown,
+            known,
+        })
+    }
+
+    /// Mean distance from the known points to `patch` (a patch of the grown hole).
+    fn mean_distance(&self, patch: &Patch) -> f64 {
+        let k = self.hole.len();
+        let pos = |i: u32| -> DVec3 {
+            let i = i as usize;
+            if i < k {
+                self.mesh.pos(self.hole.vertices[i])
+            } else {
+                patch.new_vertices.get(i - k).copied().unwrap_or(DVec3::NAN)
+            }
+        };
+        let tris: Vec<[DVec3; 3]> = patch
+            .triangles
+            .iter()
+            .map(|t| [pos(t[0]), pos(t[1]), pos(t[2])])
+            .collect();
+        if tris.is_empty() {
+            return f64::INFINITY;
+        }
+        let bvh = Bvh::build(tris.len(), |i| tri_box(&tris[i]));
+        let start = self.hole.mean_edge_length.max(f64::MIN_POSITIVE);
+        let total: f64 = self
+            .known
+            .iter()
+            .map(|&p| nearest(&bvh, &tris, p, start))
+            .sum();
+        total / self.known.len() as f64
+    }
+}
+
+/// Distance from `p` to the nearest of `tris`: boxes of radius `r`, doubled until
+/// the nearest triangle found lies within the box.
+fn nearest(bvh: &Bvh, tris: &[[DVec3; 3]], p: DVec3, mut r: f64) -> f64 {
+    for _ in 0..64 {
+        let mut best = f64::INFINITY;
+        let lo = p - DVec3::splat(r);
+        let hi = p + DVec3::splat(r);
+        bvh.query(lo, hi, |i| {
+            let [a, b, c] = tris[i];
+            best = best.min((closest_point_on_triangle(p, a, b, c) - p).length());
+            false
+        });
+        if best <= r {
+            return best;
+        }
+        r *= 2.0;
+    }
+    // not reached for finite input: 64 doublings span every finite distance
+    tris.iter()
+        .map(|&[a, b, c]| (closest_point_on_triangle(p, a, b, c) - p).length())
+        .fold(f64::INFINITY, f64::min)
+}
+
+fn ms_since(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1000.0
+}
+
+#[cfg(test)]
+mod tests;
