@@ -107,10 +107,97 @@ fn sphere_case(policy: Option<&str>, max_bound: f64, mean_bound: f64) {
             .iter()
             .any(|a| a["outcome"] == "accepted"));
         assert!(h["quality"]["q_good_share"].as_f64().unwrap() > 0.0);
+        assert!(
+            h.get("selection").is_none(),
+            "no selection in mode first: {h}"
+        );
     }
     assert_eq!(log["summary"]["filled"], nholes);
     assert_eq!(log["input"]["format"], "obj");
     assert!(log["timings"]["fill_ms"].is_number());
+}
+
+#[test]
+fn self_validation_scores_both_candidates_and_fills_with_the_winner() {
+    let dir = tempdir();
+    let (s, nholes) = holed_sphere();
+    let inp = dir.path().join("sphere.obj");
+    let out = dir.path().join("out.obj");
+    let rep = dir.path().join("sphere.repair.json");
+    let pol = dir.path().join("policy.toml");
+    std::fs::write(&pol, "[select]\nmode = \"validate\"\n").unwrap();
+    write_obj(&inp, &s);
+    let o = run(&[
+        "fill",
+        inp.to_str().unwrap(),
+        out.to_str().unwrap(),
+        "--policy",
+        pol.to_str().unwrap(),
+        "--report",
+        rep.to_str().unwrap(),
+    ]);
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let r = read_obj(&out);
+    assert_eq!(boundary_edges(&r), 0, "output still has holes");
+    for (i, p) in s.v.iter().enumerate() {
+        assert_eq!(
+            r.v[i].map(f64::to_bits),
+            p.map(f64::to_bits),
+            "vertex {i} moved"
+        );
+    }
+    // whichever candidate won, the patch is on the sphere (the bounds of the default)
+    let new: Vec<f64> = r.v[s.v.len()..]
+        .iter()
+        .map(|&p| (radius(p) - 1.0).abs())
+        .collect();
+    let max = new.iter().cloned().fold(0.0, f64::max);
+    let mean = new.iter().sum::<f64>() / new.len() as f64;
+    assert!(
+        max < 0.12 && mean < 0.03,
+        "radial error max {max}, mean {mean}"
+    );
+
+    let log: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+    let holes = log["holes"].as_array().unwrap();
+    assert_eq!(holes.len(), nholes);
+    let mut validated = 0;
+    for h in holes {
+        assert_eq!(h["status"], "filled", "{h}");
+        if h["class"] == "small" {
+            // one candidate in the small list ("min_area_fair"): nothing compared
+            assert!(h.get("selection").is_none(), "{h}");
+            continue;
+        }
+        let sel = &h["selection"];
+        assert_eq!(sel["reason"], "", "{h}");
+        // the known points: the hole's own loop, the vertices of the removed ring
+        // and the removed faces' centroids
+        assert!(
+            sel["known_points"].as_u64().unwrap() > 2 * h["boundary_vertices"].as_u64().unwrap(),
+            "{h}"
+        );
+        let c = sel["candidates"].as_array().unwrap();
+        let names: Vec<&str> = c.iter().map(|c| c["method"].as_str().unwrap()).collect();
+        assert_eq!(names, ["wavefront", "min_area_fair"], "{h}");
+        let scores: Vec<f64> = c.iter().map(|c| c["score"].as_f64().unwrap()).collect();
+        let best = if scores[1] < scores[0] {
+            names[1]
+        } else {
+            names[0]
+        };
+        assert_eq!(sel["winner"], best, "{h}");
+        // the winner is tried first
+        assert_eq!(h["tried"][0]["method"], best, "{h}");
+        validated += 1;
+    }
+    assert_eq!(validated, 2, "the middle and the large hole");
 }
 
 #[test]

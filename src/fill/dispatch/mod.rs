@@ -44,6 +44,21 @@ pub fn run_method_checked(
     }
 }
 
+/// Runs one method's own fill, without the dispatcher's relaxation and checks and
+/// without the self-checked methods' variants (the self-validation's candidates,
+/// [`select`]).
+pub fn run_method_unchecked(method: Method, ctx: &FillContext) -> Result<Patch, FillError> {
+    match method {
+        Method::Fan => fan::fill(ctx),
+        Method::MinAreaFair => min_area_fair::fill(ctx),
+        Method::AdvancingFront => advancing_front::fill(ctx),
+        Method::LssvmPoisson => lssvm_poisson::fill(ctx),
+        Method::Wavefront => wavefront::fill(ctx),
+        Method::Hpde => hpde::fill(ctx),
+        Method::Close => close::fill_checked(ctx).map(|(p, _)| p),
+    }
+}
+
 /// The method list of a class.
 pub fn methods_for(policy: &Policy, class: HoleClass) -> &[Method] {
     match class {

@@ -13,8 +13,8 @@
 //! A hole whose grown region is not a disk (it reaches another hole or the border, or
 //! wraps a handle) keeps the list's order, with the reason in the log.
 
-use super::attempt;
-use crate::check::Checker;
+use super::run_method_unchecked;
+use crate::fill::kit::{Deadline, FillContext, FillError};
 use crate::geometry::bvh::{tri_box, Bvh};
 use crate::geometry::measure::closest_point_on_triangle;
 use crate::io::RawMesh;
@@ -69,7 +69,17 @@ pub fn validate(mesh: &Mesh, hole: &Hole, policy: &Policy, candidates: &[Method]
         reason: String::new(),
         ms: 0.0,
     };
-    let grown = match Grown::new(mesh, hole, policy, rings) {
+    // the policy's rings, or fewer when the region they give is not a disk (its rim
+    // pinched where two growing fronts met)
+    let mut grown = Err(String::new());
+    for r in (1..=rings).rev() {
+        grown = Grown::new(mesh, hole, policy, r);
+        if grown.is_ok() {
+            sel.rings = r;
+            break;
+        }
+    }
+    let grown = match grown {
         Ok(g) => g,
         Err(why) => {
             sel.reason = why;
@@ -80,20 +90,36 @@ pub fn validate(mesh: &Mesh, hole: &Hole, policy: &Policy, candidates: &[Method]
     sel.grown_boundary_vertices = grown.hole.len();
     sel.known_points = grown.known.len();
     let diag = mesh.bbox_diagonal().max(f64::MIN_POSITIVE);
-    let checker = Checker::new(&grown.mesh);
     for &method in candidates {
         let tc = Instant::now();
-        let c = match attempt(method, &grown.mesh, &grown.hole, policy, &checker, false) {
-            Ok((patch, _, _)) => Candidate {
+        let ctx = FillContext {
+            mesh: &grown.mesh,
+            hole: &grown.hole,
+            policy,
+            deadline: Deadline::after_ms(policy.limits.hole_time_ms),
+            checker: None,
+            rim_bound: false,
+        };
+        let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            run_method_unchecked(method, &ctx)
+        }))
+        .unwrap_or_else(|_| {
+            Err(FillError::internal(format!(
+                "internal error in {}",
+                method.name()
+            )))
+        });
+        let c = match run {
+            Ok(patch) => Candidate {
                 method,
                 score: Some(1000.0 * grown.mean_distance(&patch) / diag),
                 reason: String::new(),
                 ms: ms_since(tc),
             },
-            Err((a, _)) => Candidate {
+            Err(why) => Candidate {
                 method,
                 score: None,
-                reason: a.reason,
+                reason: why.to_string(),
                 ms: ms_since(tc),
             },
         };
@@ -156,6 +182,33 @@ impl Grown {
             }
             frontier = next;
         }
+        // pieces of surface the grown region encloses (where fronts met around them)
+        // join it: the kept faces are those connected to the outermost ring
+        let outer = rings + CONTEXT_RINGS - 1;
+        let kept_faces: Vec<FaceId> = face_ring
+            .iter()
+            .filter(|&(_, &r)| r >= rings)
+            .map(|(&f, _)| f)
+            .collect();
+        let mut uf = UnionFind::default();
+        for &f in &kept_faces {
+            let [a, b, c] = topo.face(f);
+            uf.union(a, b);
+            uf.union(a, c);
+        }
+        let outer_roots: std::collections::HashSet<VertexId> = kept_faces
+            .iter()
+            .filter(|f| face_ring.get(f) == Some(&outer))
+            .map(|&f| uf.find(topo.face(f)[0]))
+            .collect();
+        for &f in &kept_faces {
+            if !outer_roots.contains(&uf.find(topo.face(f)[0])) {
+                face_ring.insert(f, 0);
+                for c in topo.face(f) {
+                    depth.insert(c, 0);
+                }
+            }
+        }
         // the grown region must not reach another boundary (hole or border): its
         // faces' corners are all interior vertices or on this hole's loop
         for (&f, &r) in &face_ring {
@@ -200,11 +253,14 @@ impl Grown {
             }
         }
         // vertices inside the grown region: reached by its rings and on no kept face
-        for (&v, &d) in &depth {
-            if d <= rings && !local_of.contains_key(&v) {
-                known.push(mesh.pos(v));
-            }
-        }
+        // (in vertex order, so that the score does not depend on hashing)
+        let mut inside: Vec<VertexId> = depth
+            .iter()
+            .filter(|&(v, &d)| d <= rings && !local_of.contains_key(v))
+            .map(|(&v, _)| v)
+            .collect();
+        inside.sort_unstable_by_key(|v| v.idx());
+        known.extend(inside.into_iter().map(|v| mesh.pos(v)));
         let raw = RawMesh {
             positions,
             colors: colors.filter(|c| !c.is_empty()),
@@ -288,6 +344,33 @@ impl Grown {
             .map(|&p| nearest(&bvh, &tris, p, start))
             .sum();
         total / self.known.len() as f64
+    }
+}
+
+/// Union-find over vertices (path halving), for the pieces of the kept surface.
+#[derive(Default)]
+struct UnionFind {
+    parent: HashMap<VertexId, VertexId>,
+}
+
+impl UnionFind {
+    fn find(&mut self, v: VertexId) -> VertexId {
+        let mut x = v;
+        loop {
+            let p = *self.parent.entry(x).or_insert(x);
+            if p == x {
+                return x;
+            }
+            let gp = *self.parent.entry(p).or_insert(p);
+            self.parent.insert(x, gp);
+            x = gp;
+        }
+    }
+    fn union(&mut self, a: VertexId, b: VertexId) {
+        let (ra, rb) = (self.find(a), self.find(b));
+        if ra != rb {
+            self.parent.insert(ra, rb);
+        }
     }
 }
 

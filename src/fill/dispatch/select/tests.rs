@@ -1,4 +1,5 @@
 use super::*;
+use crate::check::Checker;
 use crate::fill::dispatch::{fill_hole, methods_for};
 use crate::policy::Settings;
 use crate::report::HoleStatus;
@@ -63,6 +64,11 @@ fn the_score_is_the_distance_from_the_removed_surface() {
     let (mesh, lp) = flat_hole();
     let hole = Hole::new(0, &mesh, lp, &policy);
     let g = Grown::new(&mesh, &hole, &policy, 2).unwrap();
+    assert_eq!(
+        g.mesh.topo.boundary_loops().len(),
+        2,
+        "the grown hole and the piece's border"
+    );
     g.mesh.validate().unwrap();
     // two rings around the 2 x 2 hole (from x, y = 9 to 11): the grown loop lies
     // between one and two cells out, every known point inside it, on the plane
@@ -94,11 +100,28 @@ fn the_score_is_the_distance_from_the_removed_surface() {
 }
 
 #[test]
-fn a_hole_whose_grown_region_reaches_another_keeps_the_list_order() {
+fn a_hole_whose_grown_region_reaches_another_is_grown_less() {
     let policy = validating();
-    // two 2 x 2 holes two cells apart: two rings reach from one to the other
+    // two 2 x 2 holes two cells apart: two rings reach from one to the other, one
+    // does not
     let raw = cells_removed(unit_grid(20), |i, j| {
         (5..7).contains(&j) && ((5..7).contains(&i) || (9..11).contains(&i))
+    });
+    let (mesh, lp) = mesh_and_loop(&raw, |m, l| l.len() == 8 && m.pos(l[0]).x < 8.0);
+    let hole = Hole::new(0, &mesh, lp, &policy);
+    let methods = vec![Method::Wavefront, Method::MinAreaFair, Method::Close];
+    let (_, sel) = order(&mesh, &hole, &policy, &methods);
+    let sel = sel.unwrap();
+    assert_eq!(sel.rings, 1, "{sel:?}");
+    assert!(sel.winner.is_some(), "{sel:?}");
+}
+
+#[test]
+fn a_hole_whose_grown_region_reaches_another_keeps_the_list_order() {
+    let policy = validating();
+    // two 2 x 2 holes one cell apart: one ring reaches from one to the other
+    let raw = cells_removed(unit_grid(20), |i, j| {
+        (5..7).contains(&j) && ((5..7).contains(&i) || (8..10).contains(&i))
     });
     let (mesh, lp) = mesh_and_loop(&raw, |m, l| l.len() == 8 && m.pos(l[0]).x < 8.0);
     let hole = Hole::new(0, &mesh, lp, &policy);
@@ -125,5 +148,33 @@ fn the_first_mode_or_a_single_candidate_compares_nothing() {
     assert_eq!(
         order(&mesh, &hole, &validating(), &one),
         (one.clone(), None)
+    );
+}
+
+#[test]
+fn surface_the_grown_region_encloses_joins_it() {
+    let policy = validating();
+    // a C-shaped hole, two cells wide, around a 3 x 3 block of kept cells joined to the
+    // rest by a neck one cell wide: one ring removes the block's outer cells and the
+    // neck, and leaves its centre cell enclosed by the grown region; the centre joins
+    // the grown region, whose rim is then one loop
+    let raw = cells_removed(unit_grid(20), |i, j| {
+        let ring = (7..14).contains(&i) && (7..14).contains(&j);
+        let block = (9..12).contains(&i) && (9..12).contains(&j);
+        let neck = i == 10 && j >= 12;
+        ring && !block && !neck
+    });
+    let (mesh, lp) = mesh_and_loop(&raw, |_, l| l.len() != 80);
+    assert_eq!(mesh.topo.boundary_loops().len(), 2);
+    let hole = Hole::new(0, &mesh, lp, &policy);
+    let g = Grown::new(&mesh, &hole, &policy, 1).unwrap();
+    g.mesh.validate().unwrap();
+    // the centre cell's two faces are known points, not in the copy
+    let centre = |p: &DVec3| (p.x - 10.5).abs() < 0.5 && (p.y - 10.5).abs() < 0.5;
+    assert_eq!(g.known.iter().filter(|p| centre(p)).count(), 2);
+    assert_eq!(
+        g.mesh.topo.boundary_loops().len(),
+        2,
+        "the grown hole and the border"
     );
 }
