@@ -173,8 +173,8 @@ impl Grown {
                     }
                     face_ring.insert(f, r);
                     for c in topo.face(f) {
-                        if !depth.contains_key(&c) {
-                            depth.insert(c, r + 1);
+                        if let std::collections::hash_map::Entry::Vacant(e) = depth.entry(c) {
+                            e.insert(r + 1);
                             next.push(c);
                         }
                     }
