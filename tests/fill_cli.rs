@@ -399,48 +399,57 @@ fn parallel_filling_gives_the_serial_output_byte_for_byte() {
     }
     let inp = dir.path().join("many.obj");
     write_obj(&inp, &s);
-    let mut outs = Vec::new();
-    for threads in [1, 4] {
-        let pol = dir.path().join(format!("t{threads}.toml"));
-        std::fs::write(&pol, format!("[limits]\nthreads = {threads}\n")).unwrap();
-        let out = dir.path().join(format!("out{threads}.obj"));
-        let rep = dir.path().join(format!("rep{threads}.json"));
-        let o = run(&[
-            "fill",
-            inp.to_str().unwrap(),
-            out.to_str().unwrap(),
-            "--policy",
-            pol.to_str().unwrap(),
-            "--report",
-            rep.to_str().unwrap(),
-            "-q",
-        ]);
-        assert_eq!(
-            o.status.code(),
-            Some(0),
-            "{}",
-            String::from_utf8_lossy(&o.stderr)
-        );
-        let log: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
-        let holes: Vec<(String, String, u64)> = log["holes"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|h| {
-                (
-                    h["status"].to_string(),
-                    h["method"].to_string(),
-                    h["added_faces"].as_u64().unwrap(),
-                )
-            })
-            .collect();
-        assert_eq!(holes.len(), centres.len());
-        outs.push((std::fs::read(&out).unwrap(), holes));
+    // the list's order, and the self-validation's (whose scores must not depend on
+    // threads either)
+    for select in ["first", "validate"] {
+        let mut outs = Vec::new();
+        for threads in [1, 4] {
+            let pol = dir.path().join(format!("t{threads}-{select}.toml"));
+            std::fs::write(
+                &pol,
+                format!("[limits]\nthreads = {threads}\n[select]\nmode = \"{select}\"\n"),
+            )
+            .unwrap();
+            let out = dir.path().join(format!("out{threads}-{select}.obj"));
+            let rep = dir.path().join(format!("rep{threads}-{select}.json"));
+            let o = run(&[
+                "fill",
+                inp.to_str().unwrap(),
+                out.to_str().unwrap(),
+                "--policy",
+                pol.to_str().unwrap(),
+                "--report",
+                rep.to_str().unwrap(),
+                "-q",
+            ]);
+            assert_eq!(
+                o.status.code(),
+                Some(0),
+                "{}",
+                String::from_utf8_lossy(&o.stderr)
+            );
+            let log: serde_json::Value =
+                serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+            let holes: Vec<(String, String, u64)> = log["holes"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|h| {
+                    (
+                        h["status"].to_string(),
+                        h["method"].to_string(),
+                        h["added_faces"].as_u64().unwrap(),
+                    )
+                })
+                .collect();
+            assert_eq!(holes.len(), centres.len());
+            outs.push((std::fs::read(&out).unwrap(), holes));
+        }
+        assert_eq!(outs[0].1, outs[1].1, "{select}: the same hole outcomes");
+        assert!(outs[0].0 == outs[1].0, "{select}: the same output bytes");
+        let one = dir.path().join(format!("out1-{select}.obj"));
+        assert_eq!(boundary_edges(&read_obj(&one)), 0);
     }
-    assert_eq!(outs[0].1, outs[1].1, "the same hole outcomes");
-    assert!(outs[0].0 == outs[1].0, "the same output bytes");
-    assert_eq!(boundary_edges(&read_obj(&dir.path().join("out1.obj"))), 0);
 }
 
 /// `a` and `b` as one soup, `b`'s vertices after `a`'s (no vertex shared).
