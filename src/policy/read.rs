@@ -22,7 +22,7 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
         "dispatch",
         &["small_max", "middle_max", "small", "middle", "large"],
     ),
-    ("select", &["mode", "rings", "methods"]),
+    ("select", &["mode", "rings", "vertices_per_ring", "methods"]),
     (
         "border",
         &[
@@ -343,6 +343,7 @@ impl Reader<'_> {
             ("clean", "split_long_edges") => p.clean.split_long_edges = self.float(key, v)?,
             ("select", "mode") => p.select.mode = self.named(key, v)?,
             ("select", "rings") => p.select.rings = self.usize(key, v)?,
+            ("select", "vertices_per_ring") => p.select.vertices_per_ring = self.usize(key, v)?,
             ("select", "methods") => p.select.methods = self.methods(key, v)?,
             ("rim", "trim") => p.rim.trim = self.boolean(key, v)?,
             ("rim", "max_rings") => p.rim.max_rings = self.usize(key, v)?,

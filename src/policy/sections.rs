@@ -56,8 +56,12 @@ pub enum SelectMode {
 #[serde(default, deny_unknown_fields)]
 pub struct Select {
     pub mode: SelectMode,
-    /// Rings of input faces around the hole removed for the self-validation.
+    /// Rings of input faces around the hole removed for the self-validation (at least).
     pub rings: usize,
+    /// One ring per this many boundary vertices when that is more than `rings` (a
+    /// large hole is grown deeper, so that the known points test more than the rim);
+    /// 0: always `rings`.
+    pub vertices_per_ring: usize,
     /// The candidates: the methods of a hole's list that are also here, when at least
     /// two are.
     pub methods: Vec<Method>,
@@ -68,6 +72,7 @@ impl Default for Select {
         Select {
             mode: SelectMode::First,
             rings: 2,
+            vertices_per_ring: 25,
             methods: vec![Method::Wavefront, Method::MinAreaFair],
         }
     }

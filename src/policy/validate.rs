@@ -91,6 +91,15 @@ impl Settings {
                 format!("must be between 1 and 8 (got {})", sel.rings),
             ));
         }
+        if sel.vertices_per_ring != 0 && sel.vertices_per_ring < 3 {
+            return Err(Invalid::new(
+                "select.vertices_per_ring",
+                format!(
+                    "must be 0 (off) or at least 3 (got {})",
+                    sel.vertices_per_ring
+                ),
+            ));
+        }
         for (i, m) in sel.methods.iter().enumerate() {
             if sel.methods[..i].contains(m) {
                 return Err(Invalid::new(

@@ -20,7 +20,7 @@ use crate::geometry::measure::closest_point_on_triangle;
 use crate::io::RawMesh;
 use crate::mesh::{FaceId, Mesh, VertexId};
 use crate::patch::{Hole, Patch};
-use crate::policy::{Method, Policy, SelectMode};
+use crate::policy::{Method, Policy, Select, SelectMode};
 use crate::report::{Candidate, Selection};
 use glam::DVec3;
 use std::collections::HashMap;
@@ -56,10 +56,19 @@ pub fn order(
     (order, Some(sel))
 }
 
+/// The rings a hole of `k` boundary vertices is grown by: `select.rings`, or one per
+/// `select.vertices_per_ring` boundary vertices when that is more.
+pub fn rings_for(select: &Select, k: usize) -> usize {
+    match select.vertices_per_ring {
+        0 => select.rings,
+        n => select.rings.max(k / n),
+    }
+}
+
 /// Grows `hole`, fills the grown hole with each candidate and scores it.
 pub fn validate(mesh: &Mesh, hole: &Hole, policy: &Policy, candidates: &[Method]) -> Selection {
     let t0 = Instant::now();
-    let rings = policy.select.rings;
+    let rings = rings_for(&policy.select, hole.len());
     let mut sel = Selection {
         rings,
         grown_boundary_vertices: 0,
@@ -69,16 +78,17 @@ pub fn validate(mesh: &Mesh, hole: &Hole, policy: &Policy, candidates: &[Method]
         reason: String::new(),
         ms: 0.0,
     };
-    // the policy's rings, or fewer when the region they give is not a disk (its rim
-    // pinched where two growing fronts met)
-    let mut grown = Err(String::new());
-    for r in (1..=rings).rev() {
-        grown = Grown::new(mesh, hole, policy, r);
-        if grown.is_ok() {
+    // the policy's rings, or half as many (down to 1) when the region they give is not
+    // a disk (its rim pinched where two growing fronts met, another hole reached)
+    let mut r = rings;
+    let grown = loop {
+        let g = Grown::new(mesh, hole, policy, r);
+        if g.is_ok() || r <= 1 {
             sel.rings = r;
-            break;
+            break g;
         }
-    }
+        r /= 2;
+    };
     let grown = match grown {
         Ok(g) => g,
         Err(why) => {

@@ -178,3 +178,14 @@ fn surface_the_grown_region_encloses_joins_it() {
         "the grown hole and the border"
     );
 }
+
+#[test]
+fn a_large_hole_is_grown_deeper() {
+    let mut s = Settings::default().select;
+    assert_eq!(rings_for(&s, 10), 2);
+    assert_eq!(rings_for(&s, 74), 2);
+    assert_eq!(rings_for(&s, 75), 3);
+    assert_eq!(rings_for(&s, 220), 8);
+    s.vertices_per_ring = 0;
+    assert_eq!(rings_for(&s, 220), 2);
+}
