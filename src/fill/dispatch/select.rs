@@ -2,16 +2,22 @@
 //! the four papers, the "self-validation" of issue 19).
 //!
 //! No method is best on every hole, and the true surface of a hole is unknown; the
-//! surface around it is known. So the hole is grown by `select.rings` rings of input
-//! faces (the faces with a corner on the current loop, ring by ring), each candidate
-//! fills the grown hole on a copy of the surrounding surface (`CONTEXT_RINGS` more
-//! rings, so that a method sees the rim it would see on the real hole), and its patch
-//! is scored by the mean distance from the known points it replaced (the removed
-//! faces' vertices inside the grown hole, the original loop among them, and the
-//! removed faces' centroids) to the patch. The best-scoring candidate goes first on
-//! the real hole; the others keep the list's order, so the fallback chain is as before.
-//! A hole whose grown region is not a disk (it reaches another hole or the border, or
-//! wraps a handle) keeps the list's order, with the reason in the log.
+//! surface around it is known. So the hole is grown by some rings of input faces (the
+//! faces with a corner on the current loop, ring by ring: `select.rings`, or one per
+//! `select.vertices_per_ring` boundary vertices when that is more, since a large hole
+//! is lost or won in its middle, which a thin band along its rim does not test), each
+//! candidate fills the grown hole on a copy of the surrounding surface
+//! (`CONTEXT_RINGS` more rings, so that a method sees the rim it would see on the real
+//! hole), and its patch is scored by the mean distance from the known points it
+//! replaced (the removed faces' vertices inside the grown hole, the original loop
+//! among them, and the removed faces' centroids) to the patch. A candidate runs its
+//! own fill only, without the dispatcher's relaxation and checks or its variants: the
+//! score is of its surface, and the real hole gets the full treatment. The
+//! best-scoring candidate goes first on the real hole; the others keep the list's
+//! order, so the fallback chain is as before. Surface the grown region encloses joins
+//! it; a region that is still not a disk (its rim pinched, another hole or the border
+//! reached) is grown by one ring fewer at a time, down to one, and otherwise the list's
+//! order is kept, with the reason in the log. Measurements: docs/measurements.md.
 
 use super::run_method_unchecked;
 use crate::fill::kit::{Deadline, FillContext, FillError};
@@ -78,8 +84,8 @@ pub fn validate(mesh: &Mesh, hole: &Hole, policy: &Policy, candidates: &[Method]
         reason: String::new(),
         ms: 0.0,
     };
-    // the policy's rings, or half as many (down to 1) when the region they give is not
-    // a disk (its rim pinched where two growing fronts met, another hole reached)
+    // the policy's rings, or one fewer at a time (down to 1) while the region they give
+    // is not a disk (its rim pinched where two growing fronts met, another hole reached)
     let mut r = rings;
     let grown = loop {
         let g = Grown::new(mesh, hole, policy, r);
@@ -87,7 +93,7 @@ pub fn validate(mesh: &Mesh, hole: &Hole, policy: &Policy, candidates: &[Method]
             sel.rings = r;
             break g;
         }
-        r /= 2;
+        r -= 1;
     };
     let grown = match grown {
         Ok(g) => g,
@@ -100,13 +106,15 @@ pub fn validate(mesh: &Mesh, hole: &Hole, policy: &Policy, candidates: &[Method]
     sel.grown_boundary_vertices = grown.hole.len();
     sel.known_points = grown.known.len();
     let diag = mesh.bbox_diagonal().max(f64::MIN_POSITIVE);
+    // the candidates together get one hole's time limit
+    let deadline = Deadline::after_ms(policy.limits.hole_time_ms);
     for &method in candidates {
         let tc = Instant::now();
         let ctx = FillContext {
             mesh: &grown.mesh,
             hole: &grown.hole,
             policy,
-            deadline: Deadline::after_ms(policy.limits.hole_time_ms),
+            deadline,
             checker: None,
             rim_bound: false,
         };
