@@ -59,6 +59,21 @@ pub fn run_method_unchecked(method: Method, ctx: &FillContext) -> Result<Patch, 
     }
 }
 
+/// Runs `run` (one method on one hole): a method that panics (a bug, or a solver that
+/// panics on singular input) fails over like any other failure, so one bad hole never
+/// takes the file down.
+pub(crate) fn guarded<T>(
+    method: Method,
+    run: impl FnOnce() -> Result<T, FillError>,
+) -> Result<T, FillError> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(run)).unwrap_or_else(|_| {
+        Err(FillError::internal(format!(
+            "internal error in {}",
+            method.name()
+        )))
+    })
+}
+
 /// The method list of a class.
 pub fn methods_for(policy: &Policy, class: HoleClass) -> &[Method] {
     match class {
@@ -113,18 +128,7 @@ fn attempt(
         reason,
         ms: ms_since(ta),
     };
-    // a method that panics (a bug, or a solver that panics on singular input)
-    // fails over like any other failure: one bad hole never takes the file down
-    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-        run_method_checked(method, &ctx)
-    }))
-    .unwrap_or_else(|_| {
-        Err(FillError::internal(format!(
-            "internal error in {}",
-            method.name()
-        )))
-    })
-    .and_then(|p| {
+    let result = guarded(method, || run_method_checked(method, &ctx)).and_then(|p| {
         ctx.deadline.check()?;
         Ok(p)
     });

@@ -19,8 +19,8 @@
 //! reached) is grown by one ring fewer at a time, down to one, and otherwise the list's
 //! order is kept, with the reason in the log. Measurements: docs/measurements.md.
 
-use super::run_method_unchecked;
-use crate::fill::kit::{Deadline, FillContext, FillError};
+use super::{guarded, run_method_unchecked};
+use crate::fill::kit::{Deadline, FillContext};
 use crate::geometry::bvh::{tri_box, Bvh};
 use crate::geometry::measure::closest_point_on_triangle;
 use crate::io::RawMesh;
@@ -118,15 +118,7 @@ pub fn validate(mesh: &Mesh, hole: &Hole, policy: &Policy, candidates: &[Method]
             checker: None,
             rim_bound: false,
         };
-        let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            run_method_unchecked(method, &ctx)
-        }))
-        .unwrap_or_else(|_| {
-            Err(FillError::internal(format!(
-                "internal error in {}",
-                method.name()
-            )))
-        });
+        let run = guarded(method, || run_method_unchecked(method, &ctx));
         let c = match run {
             Ok(patch) => Candidate {
                 method,
@@ -236,7 +228,8 @@ impl Grown {
             for c in topo.face(f) {
                 if !on_hole.contains_key(&c) && topo.is_boundary_vertex(c) {
                     return Err(format!(
-                        "another hole or the border is within {rings} rings of this one"
+                        "another hole or the border is within {} of this one",
+                        rings_text(rings)
                     ));
                 }
             }
@@ -311,7 +304,8 @@ impl Grown {
             .collect();
         let [lp] = loops.as_slice() else {
             return Err(format!(
-                "the region grown by {rings} rings is not a disk ({} boundary loops)",
+                "the region grown by {} is not a disk ({} boundary loops)",
+                rings_text(rings),
                 loops.len()
             ));
         };
@@ -321,7 +315,8 @@ impl Grown {
             .count();
         if on_loop != rims || lp.len() < 3 {
             return Err(format!(
-                "the region grown by {rings} rings is not a disk (its rim is not one simple loop)"
+                "the region grown by {} is not a disk (its rim is not one simple loop)",
+                rings_text(rings)
             ));
         }
         if known.is_empty() {
@@ -362,6 +357,15 @@ impl Grown {
             .map(|&p| nearest(&bvh, &tris, p, start))
             .sum();
         total / self.known.len() as f64
+    }
+}
+
+/// "1 ring", "2 rings".
+fn rings_text(n: usize) -> String {
+    if n == 1 {
+        "1 ring".into()
+    } else {
+        format!("{n} rings")
     }
 }
 
