@@ -56,6 +56,8 @@ pub const MAX_PATCH_TRIANGLES: usize = 100_000_000;
 pub const MAX_HOLE_TIME_MS: u64 = 86_400_000;
 /// Largest `smooth.iterations` (and `hpde.num_smooth`).
 pub const MAX_SMOOTH_ITERATIONS: usize = 10_000;
+/// Largest `fair.passes`: each pass is a sparse solve.
+pub const MAX_FAIR_PASSES: usize = 20;
 /// Largest `hpde.population_factor`.
 pub const MAX_HPDE_POPULATION_FACTOR: usize = 100;
 /// Largest `hpde.generations`.

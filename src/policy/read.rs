@@ -38,7 +38,10 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
     ("islands", &["mode", "remove_below_faces"]),
     ("debris", &["remove_below_faces"]),
     ("refine", &["density", "weight", "restricted_search_above"]),
-    ("fair", &["continuity", "weights", "tangential_relax"]),
+    (
+        "fair",
+        &["continuity", "weights", "tangential_relax", "passes"],
+    ),
     (
         "front",
         &[
@@ -367,6 +370,7 @@ impl Reader<'_> {
             }
             ("fair", "weights") => p.fair.weights = self.named(key, v)?,
             ("fair", "tangential_relax") => p.fair.tangential_relax = self.usize(key, v)?,
+            ("fair", "passes") => p.fair.passes = self.usize(key, v)?,
             ("front", "angle_small") => p.front.angle_small = self.float(key, v)?,
             ("front", "angle_large") => p.front.angle_large = self.float(key, v)?,
             ("front", "alpha") => p.front.alpha = self.float(key, v)?,

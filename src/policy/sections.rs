@@ -238,8 +238,8 @@ impl Default for Refine {
     fn default() -> Self {
         Refine {
             density: std::f64::consts::SQRT_2,
-            weight: TriangulationWeight::Area,
-            restricted_search_above: 60,
+            weight: TriangulationWeight::DihedralArea,
+            restricted_search_above: 400,
         }
     }
 }
@@ -264,6 +264,10 @@ pub struct Fair {
     /// Tangential relaxation steps applied to every patch after its method (0: off);
     /// evens out the triangles without moving the faired surface.
     pub tangential_relax: usize,
+    /// `min_area_fair`: passes that relax the faired patch on its own surface and fair
+    /// it again, so that the layout and the cotangent weights come from the faired
+    /// surface rather than the flat first guess (0: one fairing only).
+    pub passes: usize,
 }
 
 impl Default for Fair {
@@ -272,6 +276,7 @@ impl Default for Fair {
             continuity: 2,
             weights: Weights::Cotangent,
             tangential_relax: 30,
+            passes: 3,
         }
     }
 }

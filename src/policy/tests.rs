@@ -372,6 +372,11 @@ const RANGE_CASES: &[(&str, &str, &str)] = &[
         "must be 0, 1, 2 or 3 (got 4)",
     ),
     (
+        "[fair]\npasses = 21",
+        "fair.passes",
+        "must be at most 20 (got 21)",
+    ),
+    (
         "[front]\nangle_small = -5",
         "front.angle_small",
         "must be between 0 and 180 (got -5)",
@@ -632,7 +637,7 @@ prop_compose! {
             border: Border { max_vertices, max_bbox_share, min_area_share: 0.25, only_longest },
             clean: Clean { remove_teeth, split_long_edges },
             refine: Refine { density, weight, restricted_search_above },
-            fair: Fair { continuity, weights: fair_weights, tangential_relax: 100 },
+            fair: Fair { continuity, weights: fair_weights, tangential_relax: 100, passes: 2 },
             front: Front {
                 angle_small: angles.0, angle_large: angles.1, alpha, omega1, merge_distance,
                 max_steps_per_vertex, fair: front_fair,

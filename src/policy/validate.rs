@@ -2,9 +2,9 @@
 //! A violation names the key (and, for a rule between two keys, says it from either).
 
 use super::{
-    Lssvm, Method, Settings, SmoothScope, MAX_FULL_SEARCH, MAX_HOLE_TIME_MS, MAX_HPDE_GENERATIONS,
-    MAX_HPDE_POPULATION_FACTOR, MAX_PATCH_TRIANGLES, MAX_SMOOTH_ITERATIONS, MAX_THREADS,
-    MIN_PATCH_TRIANGLES,
+    Lssvm, Method, Settings, SmoothScope, MAX_FAIR_PASSES, MAX_FULL_SEARCH, MAX_HOLE_TIME_MS,
+    MAX_HPDE_GENERATIONS, MAX_HPDE_POPULATION_FACTOR, MAX_PATCH_TRIANGLES, MAX_SMOOTH_ITERATIONS,
+    MAX_THREADS, MIN_PATCH_TRIANGLES,
 };
 
 /// A range or consistency violation found by [`Policy::validate`].
@@ -180,6 +180,16 @@ impl Settings {
                 format!(
                     "must be at most {MAX_SMOOTH_ITERATIONS} (got {})",
                     self.fair.tangential_relax
+                ),
+            ));
+        }
+
+        if self.fair.passes > MAX_FAIR_PASSES {
+            return Err(Invalid::new(
+                "fair.passes",
+                format!(
+                    "must be at most {MAX_FAIR_PASSES} (got {})",
+                    self.fair.passes
                 ),
             ));
         }

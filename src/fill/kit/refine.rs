@@ -21,8 +21,9 @@
 //!
 //! Not in the paper: [`Refiner::relax`], a light isotropic remeshing of the new
 //! vertices (interior edges longer than 1.6 times the local scale are split at their
-//! midpoint, flips bring valences toward 6, and each new vertex moves in its tangent
-//! plane toward the mean of the apexes that would make its triangles equilateral). Every
+//! midpoint, those shorter than `collapse_ratio` times it collapsed when the caller asks,
+//! flips bring valences toward 6, and each new vertex moves in its tangent plane toward
+//! the mean of the apexes that would make its triangles equilateral). Every
 //! operation is refused when it would create an angle below 15 degrees (or below what
 //! was there); loop vertices never move.
 
@@ -49,6 +50,9 @@ pub struct Refiner<'a> {
     pub valence: bool,
     /// Relaxation splits interior edges longer than this times the local scale (0: off).
     pub split_ratio: f64,
+    /// Relaxation collapses interior edges shorter than this times the local scale
+    /// (0: off).
+    pub collapse_ratio: f64,
     /// Smallest scale a new vertex gets (0: none): coarsens the refinement of huge
     /// holes (see `limits.max_patch_triangles`).
     pub scale_floor: f64,
@@ -93,6 +97,7 @@ impl<'a> Refiner<'a> {
             forbidden,
             valence: true,
             split_ratio: 1.6,
+            collapse_ratio: 0.0,
             scale_floor: 0.0,
             max_triangles: MAX_TRIANGLES,
         }
@@ -470,6 +475,231 @@ impl<'a> Refiner<'a> {
         Ok(count)
     }
 
+    /// Collapses every interior edge shorter than `ratio` times the mean scale of its
+    /// ends, shortest first (the isotropic-remeshing collapse: centroid splits leave
+    /// clusters of vertices that no flip or smoothing can even out). A new vertex goes
+    /// into a loop neighbour, which stays where it is; two new vertices meet at their
+    /// midpoint. Refused unless the ends share exactly the two opposite vertices (the
+    /// link condition), no new edge joins two loop vertices that must not be joined,
+    /// no edge of the merged vertex grows past the split length, and no triangle
+    /// around it flips or gets an angle below the smaller of 15 degrees and what was
+    /// there. Returns the number of collapses.
+    pub fn collapse_short_edges(
+        &mut self,
+        ratio: f64,
+        deadline: &Deadline,
+    ) -> Result<usize, FillError> {
+        let k = self.k;
+        let n = self.pos.len();
+        if n == k {
+            return Ok(0);
+        }
+        let mut cands: Vec<(f64, u32, u32)> = self
+            .edges
+            .keys()
+            .filter(|&&(a, b)| {
+                a < b && (b as usize >= k || a as usize >= k) && self.edges.contains_key(&(b, a))
+            })
+            .filter_map(|&(a, b)| {
+                let l = (self.pos[b as usize] - self.pos[a as usize]).length();
+                let target = 0.5 * (self.scale[a as usize] + self.scale[b as usize]);
+                (l < ratio * target).then_some((l / target, a, b))
+            })
+            .collect();
+        if cands.is_empty() {
+            return Ok(0);
+        }
+        cands.sort_by(|x, y| x.0.total_cmp(&y.0).then((x.1, x.2).cmp(&(y.1, y.2))));
+        let mut fan: Vec<Vec<u32>> = vec![Vec::new(); n];
+        for (t, tri) in self.tris.iter().enumerate() {
+            for &v in tri {
+                fan[v as usize].push(t as u32);
+            }
+        }
+        let mut dead_tri = vec![false; self.tris.len()];
+        let mut dead_vert = vec![false; n];
+        let max_len = if self.split_ratio > 0.0 {
+            0.8 * self.split_ratio
+        } else {
+            1.3
+        };
+        let min3 = measure::smallest_angle_by_cosines;
+        let guard = SLIVER_GUARD.to_radians();
+        let mut count = 0;
+        for (i, &(_, a, b)) in cands.iter().enumerate() {
+            if i % 1024 == 0 {
+                deadline.check()?;
+            }
+            if dead_vert[a as usize] || dead_vert[b as usize] {
+                continue;
+            }
+            let (Some(&t1), Some(&t2)) = (self.edges.get(&(a, b)), self.edges.get(&(b, a))) else {
+                continue;
+            };
+            let (pa, pb) = (self.pos[a as usize], self.pos[b as usize]);
+            let (u, w, p) = match (a as usize >= k, b as usize >= k) {
+                (false, true) => (a, b, pa),
+                (true, false) => (b, a, pb),
+                (true, true) => (a, b, (pa + pb) / 2.0),
+                (false, false) => continue,
+            };
+            let target = 0.5 * (self.scale[a as usize] + self.scale[b as usize]);
+            if (pb - pa).length() >= ratio * target {
+                continue;
+            }
+            let c = Self::third(self.tris[t1 as usize], a, b);
+            let d = Self::third(self.tris[t2 as usize], a, b);
+            // link condition: the common neighbours of u and w are c and d only
+            let nbrs = |v: u32, fan: &Vec<Vec<u32>>| -> Vec<u32> {
+                let mut out: Vec<u32> = fan[v as usize]
+                    .iter()
+                    .filter(|&&t| !dead_tri[t as usize])
+                    .flat_map(|&t| self.tris[t as usize])
+                    .filter(|&x| x != v)
+                    .collect();
+                out.sort_unstable();
+                out.dedup();
+                out
+            };
+            let nu = nbrs(u, &fan);
+            let nw = nbrs(w, &fan);
+            let common = nu.iter().filter(|x| nw.binary_search(x).is_ok()).count();
+            if common != 2 || c == d {
+                continue;
+            }
+            // new edges u-x for the neighbours x of w
+            let ku = (u as usize) < k;
+            let bad_edge = nw.iter().any(|&x| {
+                if x == u || x == c || x == d {
+                    return false;
+                }
+                if ku && (x as usize) < k {
+                    let kk = k as u32;
+                    if (u + 1) % kk == x || (x + 1) % kk == u {
+                        return true;
+                    }
+                    if self.forbidden.contains(&(u.min(x), u.max(x))) {
+                        return true;
+                    }
+                }
+                let lim = max_len * 0.5 * (self.scale[u as usize] + self.scale[x as usize]);
+                (self.pos[x as usize] - p).length() > lim
+            });
+            if bad_edge {
+                continue;
+            }
+            // the triangles that stay and change: those of w and (when u moves) of u
+            let mut moved: Vec<u32> = fan[w as usize]
+                .iter()
+                .chain(fan[u as usize].iter())
+                .copied()
+                .filter(|&t| !dead_tri[t as usize] && t != t1 && t != t2)
+                .collect();
+            moved.sort_unstable();
+            moved.dedup();
+            let mut before_min = f64::INFINITY;
+            for t in [t1, t2] {
+                let q = self.tris[t as usize].map(|i| self.pos[i as usize]);
+                before_min = before_min.min(min3(q[0], q[1], q[2]));
+            }
+            let mut ok = true;
+            let mut after_min = f64::INFINITY;
+            for &t in &moved {
+                let tri = self.tris[t as usize];
+                let before = tri.map(|i| self.pos[i as usize]);
+                let after = tri.map(|i| {
+                    if i == u || i == w {
+                        p
+                    } else {
+                        self.pos[i as usize]
+                    }
+                });
+                before_min = before_min.min(min3(before[0], before[1], before[2]));
+                after_min = after_min.min(min3(after[0], after[1], after[2]));
+                let nb_ = (before[1] - before[0]).cross(before[2] - before[0]);
+                let na = (after[1] - after[0]).cross(after[2] - after[0]);
+                let l2 = (after[1] - after[0])
+                    .length_squared()
+                    .max((after[2] - after[1]).length_squared())
+                    .max((after[0] - after[2]).length_squared());
+                if !(na.dot(nb_) > 0.0 && na.length() > 1e-6 * l2) {
+                    ok = false;
+                    break;
+                }
+            }
+            // false also when an angle is NaN
+            let angles_ok = after_min >= before_min.min(guard);
+            if !ok || !angles_ok || !p.is_finite() {
+                continue;
+            }
+            // apply
+            for t in [t1, t2] {
+                let tri = self.tris[t as usize];
+                for c in 0..3 {
+                    self.edges.remove(&(tri[c], tri[(c + 1) % 3]));
+                }
+                dead_tri[t as usize] = true;
+            }
+            let w_tris: Vec<u32> = fan[w as usize]
+                .iter()
+                .copied()
+                .filter(|&t| !dead_tri[t as usize])
+                .collect();
+            for &t in &w_tris {
+                let tri = self.tris[t as usize];
+                for c in 0..3 {
+                    self.edges.remove(&(tri[c], tri[(c + 1) % 3]));
+                }
+                let tri = tri.map(|i| if i == w { u } else { i });
+                self.tris[t as usize] = tri;
+                for c in 0..3 {
+                    self.edges.insert((tri[c], tri[(c + 1) % 3]), t);
+                }
+            }
+            fan[u as usize].extend_from_slice(&w_tris);
+            fan[w as usize].clear();
+            self.pos[u as usize] = p;
+            if (u as usize) >= k {
+                self.scale[u as usize] = target;
+            }
+            dead_vert[w as usize] = true;
+            count += 1;
+        }
+        if count > 0 {
+            self.compact(&dead_tri, &dead_vert);
+        }
+        Ok(count)
+    }
+
+    /// Drops dead triangles and vertices (new ones only), renumbering the rest.
+    fn compact(&mut self, dead_tri: &[bool], dead_vert: &[bool]) {
+        let mut map: Vec<u32> = Vec::with_capacity(self.pos.len());
+        let (mut pos, mut scale) = (Vec::new(), Vec::new());
+        for (v, &dead) in dead_vert.iter().enumerate() {
+            map.push(pos.len() as u32);
+            if !dead {
+                pos.push(self.pos[v]);
+                scale.push(self.scale[v]);
+            }
+        }
+        self.pos = pos;
+        self.scale = scale;
+        let tris: Vec<[u32; 3]> = self
+            .tris
+            .iter()
+            .zip(dead_tri)
+            .filter(|(_, &dead)| !dead)
+            .map(|(tri, _)| tri.map(|i| map[i as usize]))
+            .collect();
+        self.tris = tris;
+        self.edges.clear();
+        for (t, tri) in self.tris.iter().enumerate() {
+            for c in 0..3 {
+                self.edges.insert((tri[c], tri[(c + 1) % 3]), t as u32);
+            }
+        }
+    }
+
     /// Flips the longest edge of every triangle whose smallest angle is below
     /// `limit` (radians) when that raises the smallest angle of the pair; a few
     /// passes. Used after fairing, which can move vertices into slivers.
@@ -527,6 +757,9 @@ impl<'a> Refiner<'a> {
             deadline.check()?;
             if self.split_ratio > 0.0 {
                 self.split_long_edges(self.split_ratio, deadline)?;
+            }
+            if self.collapse_ratio > 0.0 {
+                self.collapse_short_edges(self.collapse_ratio, deadline)?;
             }
             let n = self.pos.len();
             if n == k {
@@ -664,5 +897,103 @@ impl<'a> Refiner<'a> {
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fill::kit::Deadline;
+
+    /// A flat round loop of `k` vertices (radius 1, z = 0), fanned from vertex 0 and
+    /// refined to a scale of `scale`.
+    fn refined_disk<'a>(k: usize, scale: f64, forbidden: &'a HashSet<(u32, u32)>) -> Refiner<'a> {
+        let pos: Vec<DVec3> = (0..k)
+            .map(|i| {
+                let a = std::f64::consts::TAU * i as f64 / k as f64;
+                DVec3::new(a.cos(), a.sin(), 0.0)
+            })
+            .collect();
+        let tris: Vec<[u32; 3]> = (1..k as u32 - 1).map(|i| [0, i, i + 1]).collect();
+        let mut r = Refiner::new(pos, vec![scale; k], tris, forbidden);
+        r.refine(std::f64::consts::SQRT_2, &Deadline::none())
+            .unwrap();
+        r
+    }
+
+    /// The triangles form an oriented disk over the vertices: every vertex used, every
+    /// directed edge once, the loop edges the only unpaired ones, V - E + F = 1, all
+    /// faces up.
+    fn assert_disk(r: &Refiner, k: usize) {
+        let mut used = vec![false; r.pos.len()];
+        let mut directed = HashSet::default();
+        for tri in &r.tris {
+            for c in 0..3 {
+                used[tri[c] as usize] = true;
+                assert!(
+                    directed.insert((tri[c], tri[(c + 1) % 3])),
+                    "edge twice: {tri:?}"
+                );
+            }
+            let p = tri.map(|i| r.pos[i as usize]);
+            assert!((p[1] - p[0]).cross(p[2] - p[0]).z > 0.0, "flipped {tri:?}");
+        }
+        assert!(used.iter().all(|&u| u), "an unused vertex");
+        let unpaired: Vec<_> = directed
+            .iter()
+            .filter(|&&(a, b)| !directed.contains(&(b, a)))
+            .collect();
+        assert_eq!(unpaired.len(), k);
+        for &&(a, b) in &unpaired {
+            assert!(
+                (a as usize) < k && (b as usize) == (a as usize + 1) % k,
+                "{a}-{b}"
+            );
+        }
+        let edges = (directed.len() + k) / 2;
+        assert_eq!(r.pos.len() as i64 - edges as i64 + r.tris.len() as i64, 1);
+        assert_eq!(r.pos.len(), r.scale.len());
+    }
+
+    #[test]
+    fn collapsing_short_edges_keeps_an_oriented_disk_and_the_loop() {
+        let forbidden = HashSet::default();
+        let k = 40;
+        let mut r = refined_disk(k, 0.12, &forbidden);
+        assert_disk(&r, k);
+        let loop_before: Vec<DVec3> = r.pos[..k].to_vec();
+        let short = |r: &Refiner| {
+            let mut n = 0;
+            for tri in &r.tris {
+                for c in 0..3 {
+                    let (a, b) = (tri[c] as usize, tri[(c + 1) % 3] as usize);
+                    if a < b && (a >= k || b >= k) {
+                        let l = (r.pos[a] - r.pos[b]).length();
+                        if l < 0.75 * 0.5 * (r.scale[a] + r.scale[b]) {
+                            n += 1;
+                        }
+                    }
+                }
+            }
+            n
+        };
+        let (n_before, short_before) = (r.pos.len(), short(&r));
+        assert!(short_before > 0, "the centroid splits leave short edges");
+        let collapsed = r.collapse_short_edges(0.75, &Deadline::none()).unwrap();
+        assert!(collapsed > 0);
+        assert_eq!(r.pos.len(), n_before - collapsed);
+        assert_disk(&r, k);
+        assert_eq!(&r.pos[..k], &loop_before[..], "loop vertices moved");
+        assert!(
+            short(&r) < short_before,
+            "{} -> {}",
+            short_before,
+            short(&r)
+        );
+        // and again through the relaxation, which interleaves it with the rest
+        r.collapse_ratio = 0.75;
+        r.relax(5, &Deadline::none()).unwrap();
+        assert_disk(&r, k);
+        assert_eq!(&r.pos[..k], &loop_before[..]);
     }
 }
