@@ -29,6 +29,8 @@ fn sphere_holes_are_closed_on_the_sphere_and_input_is_bit_exact() {
     // and 3 % (measured 10 % and 1.4 %)
     sphere_case(None, 0.05, 0.02);
     sphere_case(Some("default"), 0.12, 0.03);
+    // the shipped profile with min_area_fair first: the thin-plate bounds
+    sphere_case(Some("fidelity"), 0.05, 0.02);
 }
 
 fn sphere_case(policy: Option<&str>, max_bound: f64, mean_bound: f64) {
@@ -39,7 +41,12 @@ fn sphere_case(policy: Option<&str>, max_bound: f64, mean_bound: f64) {
     let out = dir.path().join("out.obj");
     let rep = dir.path().join("sphere.repair.json");
     let pol = dir.path().join("policy.toml");
-    std::fs::write(&pol, if policy.is_some() { "" } else { THIN_PLATE }).unwrap();
+    let text = match policy {
+        None => THIN_PLATE,
+        Some("fidelity") => include_str!("../config/fidelity.toml"),
+        Some(_) => "",
+    };
+    std::fs::write(&pol, text).unwrap();
     write_obj(&inp, &s);
     assert!(boundary_edges(&s) > 0);
     let o = run(&[
@@ -107,6 +114,9 @@ fn sphere_case(policy: Option<&str>, max_bound: f64, mean_bound: f64) {
             .iter()
             .any(|a| a["outcome"] == "accepted"));
         assert!(h["quality"]["q_good_share"].as_f64().unwrap() > 0.0);
+        if policy == Some("fidelity") && h["class"] != "small" {
+            assert_eq!(h["method"], "min_area_fair", "{h}");
+        }
         assert!(
             h.get("selection").is_none(),
             "no selection in mode first: {h}"
