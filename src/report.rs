@@ -74,11 +74,12 @@ pub struct PatchQuality {
     pub valence6_share: Option<f64>,
 }
 
-/// The self-validation of one hole (`select.mode = "validate"`): the hole grown by
-/// `rings` rings of input faces, each candidate's patch of the grown hole measured
-/// against the removed faces.
+/// The per-hole choice of one hole. Mode `validate`: the hole grown by `rings` rings
+/// of input faces, each candidate's patch of the grown hole measured against the
+/// removed faces. Mode `rim`: the rim's edges within `rings` rings read (`rim`).
 #[derive(Clone, Debug, Serialize, PartialEq)]
 pub struct Selection {
+    pub mode: crate::policy::SelectMode,
     pub rings: usize,
     /// Boundary vertices of the grown hole (0 when it could not be grown).
     pub grown_boundary_vertices: usize,
@@ -90,7 +91,20 @@ pub struct Selection {
     pub winner: Option<Method>,
     /// Why there is no winner (empty when there is one).
     pub reason: String,
+    /// Mode `rim`: what the rule read.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rim: Option<RimReading>,
     pub ms: f64,
+}
+
+/// What the `rim` rule read around one hole.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct RimReading {
+    /// Interior edges with both ends within the rings.
+    pub edges: usize,
+    /// Share (0..1) of them whose faces' normals differ by less than
+    /// `select.flat_angle_deg`; `None` without edges.
+    pub flat_share: Option<f64>,
 }
 
 /// One candidate of a [`Selection`].

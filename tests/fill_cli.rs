@@ -117,10 +117,22 @@ fn sphere_case(policy: Option<&str>, max_bound: f64, mean_bound: f64) {
         if policy == Some("fidelity") && h["class"] != "small" {
             assert_eq!(h["method"], "min_area_fair", "{h}");
         }
-        assert!(
-            h.get("selection").is_none(),
-            "no selection in mode first: {h}"
-        );
+        if policy == Some("fidelity") {
+            // the rim rule reads every middle and large hole: a sphere is nowhere flat
+            if h["class"] == "small" {
+                assert!(h.get("selection").is_none(), "{h}");
+            } else {
+                let sel = &h["selection"];
+                assert_eq!(sel["mode"], "rim", "{h}");
+                assert_eq!(sel["rim"]["flat_share"], 0.0, "{h}");
+                assert!(sel["winner"].is_null(), "{h}");
+            }
+        } else {
+            assert!(
+                h.get("selection").is_none(),
+                "no selection in mode first: {h}"
+            );
+        }
     }
     assert_eq!(log["summary"]["filled"], nholes);
     assert_eq!(log["input"]["format"], "obj");
@@ -208,6 +220,67 @@ fn self_validation_scores_both_candidates_and_fills_with_the_winner() {
         validated += 1;
     }
     assert_eq!(validated, 2, "the middle and the large hole");
+}
+
+/// The shipped fidelity profile on a flat rim (a plate with a round hole: a machined
+/// face) puts the wavefront first (`select.mode = "rim"`), and the patch stays in the
+/// plate's plane; the plate's outer border is skipped as a border.
+#[test]
+fn fidelity_profile_puts_the_wavefront_first_on_a_flat_rim() {
+    let dir = tempdir();
+    let plate = grid(24, 24, 1.0, -12.0, -12.0, |_, _| 0.0);
+    let (s, gt) = cut(&plate, [0.3, -0.2, 0.0], 5.0);
+    assert!(gt.f.len() > 100);
+    let inp = dir.path().join("plate.obj");
+    let out = dir.path().join("plate.out.obj");
+    let rep = dir.path().join("plate.json");
+    let pol = dir.path().join("fidelity.toml");
+    std::fs::write(&pol, include_str!("../config/fidelity.toml")).unwrap();
+    write_obj(&inp, &s);
+    let o = run(&[
+        "fill",
+        inp.to_str().unwrap(),
+        out.to_str().unwrap(),
+        "--policy",
+        pol.to_str().unwrap(),
+        "--report",
+        rep.to_str().unwrap(),
+    ]);
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let r = read_obj(&out);
+    for (i, p) in s.v.iter().enumerate() {
+        assert_eq!(
+            r.v[i].map(f64::to_bits),
+            p.map(f64::to_bits),
+            "vertex {i} moved"
+        );
+    }
+    assert!(r.v.len() > s.v.len(), "no new vertex");
+    for p in &r.v[s.v.len()..] {
+        assert!(p[2].abs() < 1e-9, "new vertex off the plane: {p:?}");
+    }
+    let log: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+    let holes = log["holes"].as_array().unwrap();
+    let filled: Vec<&serde_json::Value> =
+        holes.iter().filter(|h| h["status"] == "filled").collect();
+    assert_eq!(filled.len(), 1, "{holes:?}");
+    let h = filled[0];
+    assert_ne!(h["class"], "small", "{h}");
+    assert_eq!(h["method"], "wavefront", "{h}");
+    assert_eq!(h["tried"][0]["method"], "wavefront", "{h}");
+    let sel = &h["selection"];
+    assert_eq!(sel["mode"], "rim", "{h}");
+    assert_eq!(sel["winner"], "wavefront", "{h}");
+    assert_eq!(sel["rim"]["flat_share"], 1.0, "{h}");
+    assert!(sel["rim"]["edges"].as_u64().unwrap() > 50, "{h}");
+    // the border is skipped, not filled
+    assert!(holes.iter().any(|h| h["status"] == "skipped"), "{holes:?}");
 }
 
 #[test]
@@ -411,7 +484,7 @@ fn parallel_filling_gives_the_serial_output_byte_for_byte() {
     write_obj(&inp, &s);
     // the list's order, and the self-validation's (whose scores must not depend on
     // threads either)
-    for select in ["first", "validate"] {
+    for select in ["first", "validate", "rim"] {
         let mut outs = Vec::new();
         for threads in [1, 4] {
             let pol = dir.path().join(format!("t{threads}-{select}.toml"));

@@ -22,7 +22,18 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
         "dispatch",
         &["small_max", "middle_max", "small", "middle", "large"],
     ),
-    ("select", &["mode", "rings", "vertices_per_ring", "methods"]),
+    (
+        "select",
+        &[
+            "mode",
+            "rings",
+            "vertices_per_ring",
+            "methods",
+            "flat_share",
+            "flat_angle_deg",
+            "flat_method",
+        ],
+    ),
     (
         "border",
         &[
@@ -348,6 +359,11 @@ impl Reader<'_> {
             ("select", "rings") => p.select.rings = self.usize(key, v)?,
             ("select", "vertices_per_ring") => p.select.vertices_per_ring = self.usize(key, v)?,
             ("select", "methods") => p.select.methods = self.methods(key, v)?,
+            ("select", "flat_share") => p.select.flat_share = self.float(key, v)?,
+            ("select", "flat_angle_deg") => p.select.flat_angle_deg = self.float(key, v)?,
+            ("select", "flat_method") => {
+                p.select.flat_method = self.name_of::<Method>(key, v, "method")?
+            }
             ("rim", "trim") => p.rim.trim = self.boolean(key, v)?,
             ("rim", "max_rings") => p.rim.max_rings = self.usize(key, v)?,
             ("rim", "max_faces") => p.rim.max_faces = self.usize(key, v)?,

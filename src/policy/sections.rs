@@ -49,6 +49,10 @@ pub enum SelectMode {
     /// each candidate fills the grown hole, and the one whose patch passes closest to
     /// the removed known surface goes first (the rest keep the list's order).
     Validate,
+    /// A rule from the rim: where most edges within `select.rings` rings of the loop
+    /// are flat (dihedral angle under `select.flat_angle_deg`, a piecewise-planar CAD
+    /// surface), `select.flat_method` goes first; elsewhere the list's order.
+    Rim,
 }
 
 /// Per-hole choice of method (`[select]`).
@@ -65,6 +69,14 @@ pub struct Select {
     /// The candidates: the methods of a hole's list that are also here, when at least
     /// two are.
     pub methods: Vec<Method>,
+    /// Mode `rim`: the share of the rim's interior edges that must be flat for
+    /// `flat_method` to go first.
+    pub flat_share: f64,
+    /// Mode `rim`: an edge is flat when the normals of its two faces differ by less
+    /// than this many degrees.
+    pub flat_angle_deg: f64,
+    /// Mode `rim`: the method put first on a flat rim.
+    pub flat_method: Method,
 }
 
 impl Default for Select {
@@ -74,6 +86,9 @@ impl Default for Select {
             rings: 2,
             vertices_per_ring: 25,
             methods: vec![Method::Wavefront, Method::MinAreaFair],
+            flat_share: 0.5,
+            flat_angle_deg: 0.5,
+            flat_method: Method::Wavefront,
         }
     }
 }
@@ -606,11 +621,13 @@ impl PolicyName for SmoothScope {
 }
 
 impl PolicyName for SelectMode {
-    const VALUES: &'static [SelectMode] = &[SelectMode::First, SelectMode::Validate];
+    const VALUES: &'static [SelectMode] =
+        &[SelectMode::First, SelectMode::Validate, SelectMode::Rim];
     fn policy_name(self) -> &'static str {
         match self {
             SelectMode::First => "first",
             SelectMode::Validate => "validate",
+            SelectMode::Rim => "rim",
         }
     }
 }

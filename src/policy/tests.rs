@@ -377,6 +377,26 @@ const RANGE_CASES: &[(&str, &str, &str)] = &[
         "must be at most 20 (got 21)",
     ),
     (
+        "[select]\nflat_share = 0",
+        "select.flat_share",
+        "must be in (0, 1] (got 0)",
+    ),
+    (
+        "[select]\nflat_share = 1.5",
+        "select.flat_share",
+        "must be in (0, 1] (got 1.5)",
+    ),
+    (
+        "[select]\nflat_angle_deg = 90",
+        "select.flat_angle_deg",
+        "must be in (0, 90) degrees (got 90)",
+    ),
+    (
+        "[select]\nflat_method = \"close\"",
+        "select.flat_method",
+        "`close` cannot go first on a flat rim: it adds no vertex, so it can only be a fallback",
+    ),
+    (
         "[front]\nangle_small = -5",
         "front.angle_small",
         "must be between 0 and 180 (got -5)",

@@ -100,6 +100,27 @@ impl Settings {
                 ),
             ));
         }
+        if !(sel.flat_share > 0.0 && sel.flat_share <= 1.0) {
+            return Err(Invalid::new(
+                "select.flat_share",
+                format!("must be in (0, 1] (got {})", sel.flat_share),
+            ));
+        }
+        if !(sel.flat_angle_deg > 0.0 && sel.flat_angle_deg < 90.0) {
+            return Err(Invalid::new(
+                "select.flat_angle_deg",
+                format!("must be in (0, 90) degrees (got {})", sel.flat_angle_deg),
+            ));
+        }
+        if matches!(sel.flat_method, Method::Close | Method::Fan) {
+            return Err(Invalid::new(
+                "select.flat_method",
+                format!(
+                    "`{}` cannot go first on a flat rim: it adds no vertex, so it can only be a fallback",
+                    sel.flat_method.name()
+                ),
+            ));
+        }
         for (i, m) in sel.methods.iter().enumerate() {
             if sel.methods[..i].contains(m) {
                 return Err(Invalid::new(

@@ -4,9 +4,10 @@
 
 use super::*;
 use crate::policy::Checks;
+use crate::policy::SelectMode;
 use crate::testutil::{
-    cut_faces, cylinder_with_hole, fan, joined, mesh_and_loop, sheet, sheet_hole_at,
-    sphere_cap_removed, sphere_with_hole, unit_grid, SHEET_HOLE,
+    cells_removed, cut_faces, cylinder_with_hole, fan, grid, joined, mesh_and_loop, sheet,
+    sheet_hole_at, sphere_cap_removed, sphere_with_hole, unit_grid, SHEET_HOLE,
 };
 use glam::DVec3;
 
@@ -215,4 +216,77 @@ fn every_method_times_out_on_a_passed_deadline() {
         timed += 1;
     }
     assert_eq!(timed, Method::ALL.len() - 1);
+}
+
+/// The `rim` rule reads the flatness of the rim: on a flat sheet every rim edge is
+/// flat and `select.flat_method` goes first; on a sphere (dihedral angles of some
+/// degrees between its faces) none is and the list's order stays, with the reason;
+/// on a sheet folded along a crease through the hole the crease's edges are not flat
+/// under `select.flat_angle_deg` and are over a wider angle; a list without the flat
+/// method is not read at all.
+#[test]
+fn rim_rule_puts_the_flat_method_first_only_on_a_flat_rim() {
+    let rule = |edit: &dyn Fn(&mut crate::policy::Settings)| {
+        Policy::default()
+            .edit(|s| {
+                s.select.mode = SelectMode::Rim;
+                edit(s);
+            })
+            .unwrap()
+    };
+    let policy = rule(&|_| {});
+    let list = [Method::MinAreaFair, Method::Wavefront, Method::Close];
+    let in_middle = |i: usize, j: usize| (3..5).contains(&i) && (3..5).contains(&j);
+
+    let sheet = cells_removed(unit_grid(8), in_middle);
+    let (mesh, lp) = mesh_and_loop(&sheet, |_, l| l.len() == 8);
+    let hole = Hole::new(0, &mesh, lp, &policy);
+    let (order, sel) = select::order(&mesh, &hole, &policy, &list);
+    let sel = sel.expect("a reading");
+    assert_eq!(
+        order,
+        [Method::Wavefront, Method::MinAreaFair, Method::Close]
+    );
+    assert_eq!(sel.mode, SelectMode::Rim);
+    assert_eq!(sel.winner, Some(Method::Wavefront));
+    assert_eq!(sel.reason, "");
+    let rim = sel.rim.expect("rim reading");
+    assert_eq!(rim.flat_share, Some(1.0));
+    // the vertices within 2 rings of the loop: x and y in 1..=7 around the empty middle
+    assert!(rim.edges > 60, "{rim:?}");
+    // a list without the flat method: nothing to choose
+    let (order, sel) = select::order(&mesh, &hole, &policy, &[Method::MinAreaFair]);
+    assert_eq!(order, [Method::MinAreaFair]);
+    assert!(sel.is_none());
+
+    let (mesh, lp) = sphere_with_hole(3, 0.5);
+    let hole = Hole::new(0, &mesh, lp, &policy);
+    let (order, sel) = select::order(&mesh, &hole, &policy, &list);
+    let sel = sel.expect("a reading");
+    assert_eq!(order, list);
+    assert_eq!(sel.winner, None);
+    assert_eq!(sel.rim.as_ref().and_then(|r| r.flat_share), Some(0.0));
+    assert!(sel.reason.contains("flat"), "{}", sel.reason);
+
+    // folded along x = 4 by 2 atan(0.5) = 53 degrees: only the crease's edges bend
+    let folded = cells_removed(grid(8, 0.0, 8.0, |x, _| 0.5 * (x - 4.0).abs()), in_middle);
+    let (mesh, lp) = mesh_and_loop(&folded, |_, l| l.len() == 8);
+    let hole = Hole::new(0, &mesh, lp, &policy);
+    let (_, sel) = select::order(&mesh, &hole, &policy, &list);
+    let share = sel.and_then(|s| s.rim).and_then(|r| r.flat_share).unwrap();
+    assert!(share > 0.9 && share < 1.0, "flat share {share}");
+    let strict = rule(&|s| s.select.flat_share = 0.99);
+    let (order, sel) = select::order(&mesh, &hole, &strict, &list);
+    assert_eq!(order, list);
+    assert_eq!(sel.map(|s| s.winner), Some(None));
+    let wide = rule(&|s| {
+        s.select.flat_share = 0.99;
+        s.select.flat_angle_deg = 60.0;
+    });
+    let (order, sel) = select::order(&mesh, &hole, &wide, &list);
+    assert_eq!(order[0], Method::Wavefront);
+    assert_eq!(
+        sel.and_then(|s| s.rim).and_then(|r| r.flat_share),
+        Some(1.0)
+    );
 }
