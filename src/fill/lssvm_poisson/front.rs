@@ -3,6 +3,7 @@
 //! turning over.
 
 use super::*;
+use crate::geometry::grid::Grid;
 use crate::geometry::predicates::{
     orient2, overlap2d_labeled, p2, segments_cross, strictly_inside, P2,
 };
@@ -221,6 +222,13 @@ pub(super) struct Front {
     pub(super) radius: f64,
     /// Close a stuck loop as a residual front (with this deadline) instead of failing.
     pub(super) residual: Option<Deadline>,
+    /// The guide normal at each patch vertex (vertices do not move while the front
+    /// runs; the guide sums over the whole loop, so computing it again at every step
+    /// made a 200-vertex hole take seconds).
+    guide_at: Vec<DVec3>,
+    /// The obstacles' centres in cells of `radius` (when that is finite): a step
+    /// tests only the obstacles in the cells around its vertex, not the whole patch.
+    near_obstacles: Option<Grid>,
 }
 
 pub(super) struct Obstacle {
@@ -320,26 +328,47 @@ impl Front {
         } else {
             Guide::new(mesh, hole, edge)
         };
-        Some(Front {
+        let radius = if planar { f64::INFINITY } else { 4.0 * edge };
+        let guide_at = pos.iter().map(|&p| guide.at(p)).collect();
+        let mut front = Front {
             pos,
             nacc,
             tris: Vec::new(),
             edges,
-            obstacles,
+            obstacles: Vec::new(),
             centre,
             reach,
             guide,
-            radius: if planar { f64::INFINITY } else { 4.0 * edge },
+            radius,
             edge,
             merge: merge_distance * edge,
             residual: None,
-        })
+            guide_at,
+            near_obstacles: (radius.is_finite() && radius > 0.0).then(|| Grid::new(radius, centre)),
+        };
+        for o in obstacles {
+            front.push_obstacle(o);
+        }
+        Some(front)
+    }
+
+    fn push_vertex(&mut self, p: DVec3) {
+        self.pos.push(p);
+        self.nacc.push(DVec3::ZERO);
+        self.guide_at.push(self.guide.at(p));
+    }
+
+    fn push_obstacle(&mut self, o: Obstacle) {
+        if let Some(g) = &mut self.near_obstacles {
+            g.insert_point(o.centre, self.obstacles.len() as u32);
+        }
+        self.obstacles.push(o);
     }
 
     /// The normal at patch vertex `i`: its own (area-weighted over the mesh and patch
     /// triangles around it) averaged with the guide normal at its position.
     fn normal(&self, i: u32) -> DVec3 {
-        let g = self.guide.at(self.pos[i as usize]);
+        let g = self.guide_at[i as usize];
         (self.nacc[i as usize].normalize_or_zero() + g).normalize_or(g)
     }
 
@@ -355,8 +384,7 @@ impl Front {
                 self.edges.insert(edge_key(t[c], t[(c + 1) % 3]));
             }
             self.tris.push(*t);
-            self.obstacles
-                .push(Obstacle::new(*t, t.map(|i| self.pos[i as usize])));
+            self.push_obstacle(Obstacle::new(*t, t.map(|i| self.pos[i as usize])));
         }
     }
 
@@ -480,8 +508,7 @@ impl Front {
         let (new_pts, tris) = residual::close(&input, &policy, deadline)?;
         let base = self.pos.len() as u32;
         for p in new_pts {
-            self.pos.push(p);
-            self.nacc.push(DVec3::ZERO);
+            self.push_vertex(p);
         }
         let mapped: Vec<[u32; 3]> = tris
             .iter()
@@ -710,11 +737,19 @@ impl Front {
                 }
             }
         }
-        // no overlap with the patch so far or the mesh around the loop
+        // no overlap with the patch so far or the mesh around the loop (the obstacles
+        // whose centre is within `radius` of p: from the grid's cells around p when
+        // there is one, each tested alike)
+        let mut ids: Vec<u32> = Vec::new();
+        match &self.near_obstacles {
+            Some(g) => g.query_box(p - DVec3::splat(radius), p + DVec3::splat(radius), &mut ids),
+            None => ids.extend(0..self.obstacles.len() as u32),
+        }
         for t in &tris {
             let pts = t.map(at);
             let pq = pts.map(proj);
-            for o in &self.obstacles {
+            for &id in &ids {
+                let o = &self.obstacles[id as usize];
                 if (o.centre - p).length() > radius || o.normal.dot(n) < 0.2 {
                     continue;
                 }
@@ -725,8 +760,7 @@ impl Front {
         }
         // commit
         for q in new_pts {
-            self.pos.push(q);
-            self.nacc.push(DVec3::ZERO);
+            self.push_vertex(q);
         }
         self.add_triangles(&tris);
         let mut seq: Vec<u32> = Vec::with_capacity(m + 2);
@@ -746,13 +780,21 @@ impl Front {
 pub(super) fn split_loops(seq: Vec<u32>) -> Vec<Vec<u32>> {
     let mut out = Vec::new();
     let mut stack = vec![seq];
+    let mut first: crate::fasthash::HashMap<u32, usize> = crate::fasthash::HashMap::default();
     while let Some(s) = stack.pop() {
-        let mut found = None;
-        'outer: for i in 0..s.len() {
-            for j in i + 1..s.len() {
-                if s[i] == s[j] {
-                    found = Some((i, j));
-                    break 'outer;
+        // the first position that repeats and its next repetition (one pass: the
+        // smallest first index wins; for it, the earliest repetition comes first)
+        first.clear();
+        let mut found: Option<(usize, usize)> = None;
+        for (j, &v) in s.iter().enumerate() {
+            match first.get(&v) {
+                Some(&i) => {
+                    if found.is_none_or(|(fi, _)| i < fi) {
+                        found = Some((i, j));
+                    }
+                }
+                None => {
+                    first.insert(v, j);
                 }
             }
         }
