@@ -73,6 +73,8 @@ pub(super) struct Builder<'a> {
     pub(super) steps: usize,
     pub(super) applied: usize,
     pub(super) set_aside: usize,
+    /// Fronts closed by [`Builder::close_residual`].
+    pub(super) residual_fronts: usize,
 }
 
 impl<'a> Builder<'a> {
@@ -234,6 +236,7 @@ impl<'a> Builder<'a> {
             steps: 0,
             applied: 0,
             set_aside: 0,
+            residual_fronts: 0,
         })
     }
 
@@ -429,6 +432,111 @@ impl<'a> Builder<'a> {
         true
     }
 
+    /// Closes every front as a residual front ([`Self::close_residual`]); false when
+    /// one cannot be (the fronts closed so far stay closed, and the method fails).
+    pub(super) fn close_all_residual(&mut self) -> Result<bool, FillError> {
+        while let Some(&n) = self.ring.alive().first() {
+            if !self.close_residual(n)? {
+                return Ok(false);
+            }
+        }
+        Ok(true)
+    }
+
+    /// Closes the front through node `start` as a residual front
+    /// ([`residual::close`]: the minimum-weight triangulation of its loop in 3-D,
+    /// refined to the size field and faired with the triangles around it fixed), the
+    /// last resort of a front that is stuck, divergent or out of steps. The whole patch
+    /// is verified when it is finished. False when the loop passes a vertex twice or
+    /// the closing fails (a timeout is passed on).
+    pub(super) fn close_residual(&mut self, start: u32) -> Result<bool, FillError> {
+        let ns = self.ring.cycle(start);
+        let m = ns.len();
+        let f = self.ring.nodes[start as usize].front as usize;
+        if m < 3 || m != self.ring.front_size[f] {
+            return Ok(false);
+        }
+        let vs: Vec<u32> = ns
+            .iter()
+            .map(|&c| self.ring.nodes[c as usize].vert)
+            .collect();
+        if vs.iter().collect::<FxSet<_>>().len() != m {
+            return Ok(false);
+        }
+        let pts: Vec<DVec3> = vs.iter().map(|&v| self.pos[v as usize]).collect();
+        let mut forbidden = crate::fasthash::HashSet::default();
+        for i in 0..m {
+            for j in i + 2..m {
+                let e = edge_key(vs[i], vs[j]);
+                if (i, j) != (0, m - 1) && (self.edges.contains(&e) || self.forbidden.contains(&e))
+                {
+                    forbidden.insert((i as u32, j as u32));
+                }
+            }
+        }
+        let outside: Vec<Option<DVec3>> = ns
+            .iter()
+            .map(|&c| {
+                let b = self.ring.nodes[c as usize].data.behind;
+                (b != DVec3::ZERO).then_some(b)
+            })
+            .collect();
+        // the patch triangles and mesh faces with a corner on the front: the fairing's
+        // fixed ring (matched by position)
+        let on: FxSet<u32> = vs.iter().copied().collect();
+        let key = |p: DVec3| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
+        let at: FxSet<[u64; 3]> = pts.iter().map(|&p| key(p)).collect();
+        let mut context: Vec<[DVec3; 3]> = self
+            .tris
+            .iter()
+            .filter(|t| t.iter().any(|v| on.contains(v)))
+            .map(|t| t.map(|v| self.pos[v as usize]))
+            .collect();
+        context.extend(
+            self.mesh_tris
+                .iter()
+                .filter(|t| t.iter().any(|&p| at.contains(&key(p))))
+                .copied(),
+        );
+        let edge_length = vs.iter().map(|&v| self.size[v as usize]).sum::<f64>() / m as f64;
+        let input = residual::Residual {
+            ring: &pts,
+            forbidden: &forbidden,
+            outside_normals: &outside,
+            context: &context,
+            edge_length,
+        };
+        let (new_pts, tris) = match residual::close(&input, self.ctx.policy, &self.ctx.deadline) {
+            Ok(c) => c,
+            Err(FillError::Timeout) => return Err(FillError::Timeout),
+            Err(why) => {
+                tracing::debug!(%why, m, "advancing front: residual closing failed");
+                return Ok(false);
+            }
+        };
+        let base = self.pos.len() as u32;
+        for p in new_pts {
+            self.pos.push(p);
+            self.acc.push(DVec3::ZERO);
+            self.size.push(edge_length);
+        }
+        for t in tris {
+            self.emit(t.map(|i| {
+                if (i as usize) < m {
+                    vs[i as usize]
+                } else {
+                    base + i - m as u32
+                }
+            }));
+        }
+        for n in ns {
+            self.ring.kill(n);
+        }
+        self.residual_fronts += 1;
+        tracing::debug!(m, "advancing front: front closed as a residual");
+        Ok(true)
+    }
+
     pub(super) fn rekey(&mut self, x: u32) {
         if !self.ring.nodes[x as usize].alive {
             return;
@@ -469,6 +577,9 @@ impl<'a> Builder<'a> {
                 if self.ring.front_size[f] <= FAN_MAX && self.close_fan(e.node) {
                     continue;
                 }
+                if self.close_residual(e.node)? {
+                    continue;
+                }
                 return Err(FillError::stuck(format!(
                     "the front is stuck: no valid step at any of its {} vertices",
                     self.ring.alive().len()
@@ -483,6 +594,9 @@ impl<'a> Builder<'a> {
                 }));
             }
             if self.steps > self.p.max_steps {
+                if self.close_all_residual()? {
+                    break;
+                }
                 return Err(FillError::stuck(format!(
                     "front did not close after {} steps ({} taken, {} set aside; {} triangles, {} front vertices left)",
                     self.p.max_steps,
@@ -513,6 +627,9 @@ impl<'a> Builder<'a> {
                     self.applied += 1;
                     self.apply(plan)?;
                     if self.ring.alive().len() > DIVERGE_FACTOR * self.k + 64 {
+                        if self.close_all_residual()? {
+                            break;
+                        }
                         return Err(FillError::stuck(format!(
                             "the front diverges: {} front vertices from a loop of {} after {} steps",
                             self.ring.alive().len(), self.k, self.steps

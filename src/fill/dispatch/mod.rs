@@ -36,7 +36,7 @@ pub fn run_method_checked(
     match method {
         Method::Fan => fan::fill(ctx).map(|p| (p, None)),
         Method::MinAreaFair => min_area_fair::fill_checked(ctx),
-        Method::AdvancingFront => advancing_front::fill(ctx).map(|p| (p, None)),
+        Method::AdvancingFront => advancing_front::fill_checked(ctx),
         Method::LssvmPoisson => lssvm_poisson::fill_checked(ctx),
         Method::Wavefront => wavefront::fill_checked(ctx),
         Method::Hpde => hpde::fill_checked(ctx),

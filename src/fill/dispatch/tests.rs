@@ -290,3 +290,22 @@ fn rim_rule_puts_the_flat_method_first_only_on_a_flat_rim() {
         Some(1.0)
     );
 }
+
+/// `advancing_front` forced alone on more than a hemisphere missing (the paper's
+/// divergent case): the front that spreads is closed as a residual front, or made again
+/// with one step per loop vertex, and the hole is closed by the method itself with a
+/// patch that passes the dispatcher's checks. Before, it failed ("the front diverges").
+#[test]
+fn advancing_front_closes_a_divergent_front_itself() {
+    let policy = only(Method::AdvancingFront)
+        .edit(|s| s.rim.trim = false)
+        .unwrap();
+    let (mut mesh, lp) = sphere_with_hole(4, 2.0);
+    let hole = Hole::new(0, &mesh, lp, &policy);
+    let mut chk = Checker::new(&mesh);
+    let rep = fill_hole(&mut mesh, &hole, &policy, &mut chk);
+    assert_eq!(rep.method, Some(Method::AdvancingFront), "{rep:?}");
+    assert_eq!(rep.status, HoleStatus::Filled, "{rep:?}");
+    mesh.validate().unwrap();
+    assert!(mesh.topo.boundary_loops().is_empty());
+}
