@@ -69,6 +69,19 @@ fn tri_area2(a: DVec3, b: DVec3, c: DVec3) -> f64 {
     (b - a).cross(c - a).length()
 }
 
+/// A triangle moved from `before` to `after` keeps its orientation and does not
+/// flatten (area above 1e-6 of its longest edge squared): the test of a vertex move
+/// in the relaxation and of an edge collapse.
+fn stays_oriented(before: [DVec3; 3], after: [DVec3; 3]) -> bool {
+    let nb = (before[1] - before[0]).cross(before[2] - before[0]);
+    let na = (after[1] - after[0]).cross(after[2] - after[0]);
+    let l2 = (after[1] - after[0])
+        .length_squared()
+        .max((after[2] - after[1]).length_squared())
+        .max((after[0] - after[2]).length_squared());
+    na.dot(nb) > 0.0 && na.length() > 1e-6 * l2
+}
+
 /// Hard cap on the refined patch size (a guard against absurd scales).
 pub const MAX_TRIANGLES: usize = 4_000_000;
 
@@ -616,13 +629,7 @@ impl<'a> Refiner<'a> {
                 });
                 before_min = before_min.min(min3(before[0], before[1], before[2]));
                 after_min = after_min.min(min3(after[0], after[1], after[2]));
-                let nb_ = (before[1] - before[0]).cross(before[2] - before[0]);
-                let na = (after[1] - after[0]).cross(after[2] - after[0]);
-                let l2 = (after[1] - after[0])
-                    .length_squared()
-                    .max((after[2] - after[1]).length_squared())
-                    .max((after[0] - after[2]).length_squared());
-                if !(na.dot(nb_) > 0.0 && na.length() > 1e-6 * l2) {
+                if !stays_oriented(before, after) {
                     ok = false;
                     break;
                 }
@@ -877,13 +884,7 @@ impl<'a> Refiner<'a> {
                                 self.pos[i as usize]
                             }
                         });
-                        let nb_ = (before[1] - before[0]).cross(before[2] - before[0]);
-                        let na = (after[1] - after[0]).cross(after[2] - after[0]);
-                        let l2 = (after[1] - after[0])
-                            .length_squared()
-                            .max((after[2] - after[1]).length_squared())
-                            .max((after[0] - after[2]).length_squared());
-                        na.dot(nb_) > 0.0 && na.length() > 1e-6 * l2
+                        stays_oriented(before, after)
                     });
                 if ok && q.is_finite() {
                     self.pos[v] = q;
