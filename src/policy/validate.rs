@@ -85,12 +85,7 @@ impl Settings {
         }
 
         let sel = &self.select;
-        if !(1..=8).contains(&sel.rings) {
-            return Err(Invalid::new(
-                "select.rings",
-                format!("must be between 1 and 8 (got {})", sel.rings),
-            ));
-        }
+        between("select.rings", sel.rings, 1, 8)?;
         if sel.vertices_per_ring != 0 && sel.vertices_per_ring < 3 {
             return Err(Invalid::new(
                 "select.vertices_per_ring",
@@ -161,12 +156,7 @@ impl Settings {
             ));
         }
 
-        if !(1..=20).contains(&self.rim.max_rings) {
-            return Err(Invalid::new(
-                "rim.max_rings",
-                format!("must be between 1 and 20 (got {})", self.rim.max_rings),
-            ));
-        }
+        between("rim.max_rings", self.rim.max_rings, 1, 20)?;
 
         closed("crack.tolerance", self.crack.tolerance, 0.0, 1.0)?;
 
@@ -178,15 +168,12 @@ impl Settings {
                 format!("must be 0 (off) or between 1 and 4 (got {})", r.density),
             ));
         }
-        if !(3..=MAX_FULL_SEARCH).contains(&r.restricted_search_above) {
-            return Err(Invalid::new(
-                "refine.restricted_search_above",
-                format!(
-                    "must be between 3 and {MAX_FULL_SEARCH} (got {})",
-                    r.restricted_search_above
-                ),
-            ));
-        }
+        between(
+            "refine.restricted_search_above",
+            r.restricted_search_above,
+            3,
+            MAX_FULL_SEARCH,
+        )?;
 
         if self.fair.continuity > 3 {
             return Err(Invalid::new(
@@ -195,25 +182,12 @@ impl Settings {
             ));
         }
 
-        if self.fair.tangential_relax > MAX_SMOOTH_ITERATIONS {
-            return Err(Invalid::new(
-                "fair.tangential_relax",
-                format!(
-                    "must be at most {MAX_SMOOTH_ITERATIONS} (got {})",
-                    self.fair.tangential_relax
-                ),
-            ));
-        }
-
-        if self.fair.passes > MAX_FAIR_PASSES {
-            return Err(Invalid::new(
-                "fair.passes",
-                format!(
-                    "must be at most {MAX_FAIR_PASSES} (got {})",
-                    self.fair.passes
-                ),
-            ));
-        }
+        at_most(
+            "fair.tangential_relax",
+            self.fair.tangential_relax,
+            MAX_SMOOTH_ITERATIONS,
+        )?;
+        at_most("fair.passes", self.fair.passes, MAX_FAIR_PASSES)?;
 
         let f = &self.front;
         open("front.angle_small", f.angle_small, 0.0, 180.0)?;
@@ -235,12 +209,7 @@ impl Settings {
         closed("front.alpha", f.alpha, 0.0, 1.0)?;
         closed("front.omega1", f.omega1, 0.0, 1.0)?;
         closed("front.merge_distance", f.merge_distance, 0.0, 1.0)?;
-        if f.max_steps_per_vertex < 1 {
-            return Err(Invalid::new(
-                "front.max_steps_per_vertex",
-                format!("must be at least 1 (got {})", f.max_steps_per_vertex),
-            ));
-        }
+        at_least("front.max_steps_per_vertex", f.max_steps_per_vertex, 1)?;
 
         let w = &self.wavefront;
         open("wavefront.alpha", w.alpha, 0.0, 180.0)?;
@@ -277,44 +246,20 @@ impl Settings {
                 ),
             ));
         }
-        if w.max_steps_per_vertex < 1 {
-            return Err(Invalid::new(
-                "wavefront.max_steps_per_vertex",
-                format!("must be at least 1 (got {})", w.max_steps_per_vertex),
-            ));
-        }
+        at_least("wavefront.max_steps_per_vertex", w.max_steps_per_vertex, 1)?;
         let h = &self.hpde;
-        if !(1..=MAX_HPDE_POPULATION_FACTOR).contains(&h.population_factor) {
-            return Err(Invalid::new(
-                "hpde.population_factor",
-                format!(
-                    "must be between 1 and {MAX_HPDE_POPULATION_FACTOR} (got {})",
-                    h.population_factor
-                ),
-            ));
-        }
+        between(
+            "hpde.population_factor",
+            h.population_factor,
+            1,
+            MAX_HPDE_POPULATION_FACTOR,
+        )?;
         open("hpde.f", h.f, 0.0, 2.0)?;
         closed("hpde.cr", h.cr, 0.0, 1.0)?;
-        if h.generations > MAX_HPDE_GENERATIONS {
-            return Err(Invalid::new(
-                "hpde.generations",
-                format!(
-                    "must be at most {MAX_HPDE_GENERATIONS} (got {})",
-                    h.generations
-                ),
-            ));
-        }
+        at_most("hpde.generations", h.generations, MAX_HPDE_GENERATIONS)?;
         open("hpde.ac_deg", h.ac_deg, 0.0, 180.0)?;
         open("hpde.ic_deg", h.ic_deg, 0.0, 90.0)?;
-        if h.num_smooth > MAX_SMOOTH_ITERATIONS {
-            return Err(Invalid::new(
-                "hpde.num_smooth",
-                format!(
-                    "must be at most {MAX_SMOOTH_ITERATIONS} (got {})",
-                    h.num_smooth
-                ),
-            ));
-        }
+        at_most("hpde.num_smooth", h.num_smooth, MAX_SMOOTH_ITERATIONS)?;
         closed("hpde.collapse_rate", h.collapse_rate, 0.0, 1.0)?;
         closed("hpde.spacing", h.spacing, 0.25, 4.0)?;
 
@@ -359,15 +304,7 @@ impl Settings {
         }
 
         let s = &self.smooth;
-        if s.iterations > MAX_SMOOTH_ITERATIONS {
-            return Err(Invalid::new(
-                "smooth.iterations",
-                format!(
-                    "must be at most {MAX_SMOOTH_ITERATIONS} (got {})",
-                    s.iterations
-                ),
-            ));
-        }
+        at_most("smooth.iterations", s.iterations, MAX_SMOOTH_ITERATIONS)?;
         open("smooth.lambda", s.lambda, 0.0, 1.0)?;
         finite("smooth.mu", s.mu)?;
         if s.mu <= -1.0 {
@@ -412,12 +349,7 @@ impl Settings {
 impl Lssvm {
     /// Range checks.
     pub fn validate(&self) -> Result<(), Invalid> {
-        if self.rings == 0 || self.rings > 20 {
-            return Err(Invalid::new(
-                "lssvm.rings",
-                format!("must be in 1..=20 (got {})", self.rings),
-            ));
-        }
+        between("lssvm.rings", self.rings, 1, 20)?;
         if !(self.gamma.is_finite() && self.gamma > 0.0 && self.gamma <= 1e10) {
             return Err(Invalid::new(
                 "lssvm.gamma",
@@ -431,12 +363,7 @@ impl Lssvm {
                 format!("must be in (0, 100] (got {})", self.kernel_width),
             ));
         }
-        if self.iterations == 0 || self.iterations > 100 {
-            return Err(Invalid::new(
-                "lssvm.iterations",
-                format!("must be in 1..=100 (got {})", self.iterations),
-            ));
-        }
+        between("lssvm.iterations", self.iterations, 1, 100)?;
         if !(self.merge_distance.is_finite() && (0.0..1.0).contains(&self.merge_distance)) {
             return Err(Invalid::new(
                 "lssvm.merge_distance",
@@ -488,4 +415,43 @@ fn open(key: &'static str, x: f64, lo: f64, hi: f64) -> Result<(), Invalid> {
         return Ok(());
     };
     Err(Invalid::new(key, message))
+}
+
+/// `lo <= x <= hi` for a count.
+fn between<T>(key: &'static str, x: T, lo: T, hi: T) -> Result<(), Invalid>
+where
+    T: PartialOrd + std::fmt::Display,
+{
+    if lo <= x && x <= hi {
+        Ok(())
+    } else {
+        Err(Invalid::new(
+            key,
+            format!("must be between {lo} and {hi} (got {x})"),
+        ))
+    }
+}
+
+/// `x <= hi` for a count.
+fn at_most<T>(key: &'static str, x: T, hi: T) -> Result<(), Invalid>
+where
+    T: PartialOrd + std::fmt::Display,
+{
+    if x <= hi {
+        Ok(())
+    } else {
+        Err(Invalid::new(key, format!("must be at most {hi} (got {x})")))
+    }
+}
+
+/// `x >= lo` for a count.
+fn at_least<T>(key: &'static str, x: T, lo: T) -> Result<(), Invalid>
+where
+    T: PartialOrd + std::fmt::Display,
+{
+    if x >= lo {
+        Ok(())
+    } else {
+        Err(Invalid::new(key, format!("must be at least {lo} (got {x})")))
+    }
 }
