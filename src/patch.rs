@@ -44,6 +44,7 @@ impl Hole {
             islands_bridged: 0,
             quality: None,
             selection: None,
+            blend: None,
             ms: 0.0,
         }
     }

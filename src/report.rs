@@ -148,6 +148,27 @@ pub struct HoleReport {
     /// candidates (absent otherwise).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub selection: Option<Selection>,
+    /// The accepted patch pulled toward a second method's surface, when `blend.weight`
+    /// is set and the hole's first proposal was another method's (absent otherwise).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub blend: Option<BlendReport>,
+    pub ms: f64,
+}
+
+/// What `[blend]` did to one hole's patch.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct BlendReport {
+    /// The method whose surface the patch was pulled toward.
+    pub with: Method,
+    pub weight: f64,
+    /// Whether the pulled patch passed the checks and replaced the accepted one.
+    pub applied: bool,
+    /// Why it was not applied (empty when it was).
+    pub reason: String,
+    /// New vertices moved.
+    pub moved_vertices: usize,
+    /// Mean distance they moved, in mean boundary edge lengths of the hole.
+    pub mean_shift: f64,
     pub ms: f64,
 }
 

@@ -126,12 +126,21 @@ fn sphere_case(policy: Option<&str>, max_bound: f64, mean_bound: f64) {
                 assert_eq!(sel["mode"], "rim", "{h}");
                 assert_eq!(sel["rim"]["flat_share"], 0.0, "{h}");
                 assert!(sel["winner"].is_null(), "{h}");
+                // and the thin plate's patch is pulled halfway to the wavefront's
+                let b = &h["blend"];
+                assert_eq!(b["with"], "wavefront", "{h}");
+                assert_eq!(b["weight"], 0.5, "{h}");
+                assert_eq!(b["applied"], true, "{h}");
+                assert_eq!(b["moved_vertices"], h["added_vertices"], "{h}");
+                let shift = b["mean_shift"].as_f64().unwrap();
+                assert!(shift > 0.0 && shift < 1.0, "{h}");
             }
         } else {
             assert!(
                 h.get("selection").is_none(),
                 "no selection in mode first: {h}"
             );
+            assert!(h.get("blend").is_none(), "no blend by default: {h}");
         }
     }
     assert_eq!(log["summary"]["filled"], nholes);

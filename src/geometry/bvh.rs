@@ -12,6 +12,8 @@
 
 use glam::DVec3;
 
+use super::measure::closest_point_on_triangle;
+
 /// Largest number of primitives in a leaf.
 const MAX_LEAF: usize = 8;
 
@@ -425,6 +427,33 @@ pub fn boxes_meet(alo: DVec3, ahi: DVec3, blo: DVec3, bhi: DVec3) -> bool {
 }
 
 /// Bounding box of a triangle.
+/// The closest point to `p` on the triangles `tris` (indexed by `bvh`, built over
+/// their boxes): boxes of half-width `r` around `p`, doubled until the closest point
+/// found lies within the box. `None` when there is no triangle.
+pub fn closest_on_triangles(bvh: &Bvh, tris: &[[DVec3; 3]], p: DVec3, r: f64) -> Option<DVec3> {
+    let mut r = r.max(f64::MIN_POSITIVE);
+    for _ in 0..64 {
+        let mut best: Option<(f64, DVec3)> = None;
+        bvh.query(p - DVec3::splat(r), p + DVec3::splat(r), |i| {
+            let [a, b, c] = tris[i];
+            let q = closest_point_on_triangle(p, a, b, c);
+            let d = (q - p).length();
+            if best.is_none_or(|(bd, _)| d < bd) {
+                best = Some((d, q));
+            }
+            false
+        });
+        if let Some((_, q)) = best.filter(|&(d, _)| d <= r) {
+            return Some(q);
+        }
+        r *= 2.0;
+    }
+    // reached only for non-finite input or distances beyond 2^64 r: every triangle
+    tris.iter()
+        .map(|&[a, b, c]| closest_point_on_triangle(p, a, b, c))
+        .min_by(|x, y| (*x - p).length().total_cmp(&(*y - p).length()))
+}
+
 pub fn tri_box(t: &[DVec3; 3]) -> (DVec3, DVec3) {
     (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]))
 }

@@ -85,6 +85,7 @@ pub struct Settings {
     pub seed: u64,
     pub dispatch: Dispatch,
     pub select: Select,
+    pub blend: Blend,
     pub border: Border,
     pub clean: Clean,
     pub rim: Rim,

@@ -34,6 +34,7 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
             "flat_method",
         ],
     ),
+    ("blend", &["weight", "with"]),
     (
         "border",
         &[
@@ -364,6 +365,8 @@ impl Reader<'_> {
             ("select", "flat_method") => {
                 p.select.flat_method = self.name_of::<Method>(key, v, "method")?
             }
+            ("blend", "weight") => p.blend.weight = self.float(key, v)?,
+            ("blend", "with") => p.blend.with = self.name_of::<Method>(key, v, "method")?,
             ("rim", "trim") => p.rim.trim = self.boolean(key, v)?,
             ("rim", "max_rings") => p.rim.max_rings = self.usize(key, v)?,
             ("rim", "max_faces") => p.rim.max_faces = self.usize(key, v)?,

@@ -93,6 +93,27 @@ impl Default for Select {
     }
 }
 
+/// The accepted patch pulled toward a second method's surface (`[blend]`).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct Blend {
+    /// How far each new vertex of the accepted patch moves toward the closest point
+    /// of `with`'s patch: 0 off, 1 onto it.
+    pub weight: f64,
+    /// The second method, run on the same hole (not `fan` or `close`). A patch made by
+    /// this method itself is kept as it is.
+    pub with: Method,
+}
+
+impl Default for Blend {
+    fn default() -> Self {
+        Blend {
+            weight: 0.0,
+            with: Method::Wavefront,
+        }
+    }
+}
+
 /// Which boundary loops are the outer border of an open scan (skipped, not filled).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]

@@ -134,6 +134,17 @@ impl Settings {
             }
         }
 
+        closed("blend.weight", self.blend.weight, 0.0, 1.0)?;
+        if matches!(self.blend.with, Method::Close | Method::Fan) {
+            return Err(Invalid::new(
+                "blend.with",
+                format!(
+                    "`{}` cannot be blended with: it adds no vertex, so its patch is the loop's own span",
+                    self.blend.with.name()
+                ),
+            ));
+        }
+
         let b = &self.border;
         if b.max_vertices != 0 && b.max_vertices < 3 {
             return Err(Invalid::new(

@@ -7,6 +7,7 @@
 //! The two phases of a fill, holes in parallel then serially in hole order, are in
 //! [`parallel`].
 
+pub mod blend;
 pub mod parallel;
 pub mod rim;
 pub mod select;
@@ -17,7 +18,9 @@ use crate::check::Checker;
 use crate::mesh::Mesh;
 use crate::patch::{apply_patch, Hole, Patch};
 use crate::policy::{Method, Policy};
-use crate::report::{Attempt, HoleClass, HoleReport, HoleStatus, Outcome, PatchQuality, Selection};
+use crate::report::{
+    Attempt, BlendReport, HoleClass, HoleReport, HoleStatus, Outcome, PatchQuality, Selection,
+};
 use std::time::Instant;
 
 /// Runs one method.
@@ -97,6 +100,8 @@ pub struct Proposal {
     pub tried: Vec<Attempt>,
     /// The accepted attempt: index in `order`, patch, quality, ms.
     pub accepted: Option<(usize, Patch, PatchQuality, f64)>,
+    /// What `[blend]` did to the accepted patch (`None` when it does not apply).
+    pub blend: Option<BlendReport>,
     /// Time spent, in milliseconds.
     pub ms: f64,
 }
@@ -171,12 +176,26 @@ fn attempt(
 
 /// First phase of filling a hole, read-only so that holes can run in parallel: orders
 /// the class's methods ([`select::order`]), tries them in that order and stops at the
-/// first patch that passes every check against `mesh`.
+/// first patch that passes every check against `mesh`, which [`blend`] may pull toward
+/// a second method's surface.
 pub fn propose(mesh: &Mesh, hole: &Hole, policy: &Policy, checker: &Checker) -> Proposal {
     let t0 = Instant::now();
     let (order, selection) = select::order(mesh, hole, policy, methods_for(policy, hole.class));
     let mut p = propose_from(mesh, hole, policy, checker, order, 0);
     p.selection = selection;
+    if let Some((i, patch, q, ms)) = p.accepted.take() {
+        p.accepted = Some(if blend::applies(policy, hole, p.order[i], &patch) {
+            let (pulled, rep) = blend::pull(mesh, hole, policy, checker, &patch);
+            let ms = ms + rep.ms;
+            p.blend = Some(rep);
+            match pulled {
+                Some((pulled, q)) => (i, pulled, q, ms),
+                None => (i, patch, q, ms),
+            }
+        } else {
+            (i, patch, q, ms)
+        });
+    }
     p.ms = ms_since(t0);
     p
 }
@@ -202,6 +221,7 @@ fn propose_from(
                         selection: None,
                         tried,
                         accepted: Some((i, patch, q, ms)),
+                        blend: None,
                         ms: ms_since(t0),
                     }
                 }
@@ -217,6 +237,7 @@ fn propose_from(
         selection: None,
         tried,
         accepted: None,
+        blend: None,
         ms: ms_since(t0),
     }
 }
@@ -248,6 +269,7 @@ pub fn finish_hole(
         return rep;
     }
     let methods = proposal.order;
+    let mut blend = proposal.blend;
     let mut next = Some(proposal.accepted);
     let mut from = methods.len();
     // the proposal first, then each later method with full checks
@@ -264,6 +286,8 @@ pub fn finish_hole(
                             reason: why.to_string(),
                             ms,
                         });
+                        // the blend was of this patch; a later one is not blended
+                        blend = None;
                         None
                     }
                 }
@@ -297,15 +321,19 @@ pub fn finish_hole(
                 rep.added_vertices = patch.new_vertices.len();
                 rep.added_faces = patch.triangles.len();
                 rep.quality = Some(quality);
+                rep.blend = blend;
                 done(&mut rep);
                 return rep;
             }
-            Err(why) => rep.tried.push(Attempt {
-                method,
-                outcome: Outcome::Rejected,
-                reason: why.to_string(),
-                ms,
-            }),
+            Err(why) => {
+                blend = None;
+                rep.tried.push(Attempt {
+                    method,
+                    outcome: Outcome::Rejected,
+                    reason: why.to_string(),
+                    ms,
+                })
+            }
         }
     }
     rep.reason = if rep.tried.is_empty() {

@@ -25,8 +25,7 @@
 
 use super::{guarded, run_method_unchecked};
 use crate::fill::kit::{Deadline, FillContext};
-use crate::geometry::bvh::{tri_box, Bvh};
-use crate::geometry::measure::closest_point_on_triangle;
+use crate::geometry::bvh::{closest_on_triangles, tri_box, Bvh};
 use crate::io::RawMesh;
 use crate::mesh::{FaceId, Mesh, VertexId};
 use crate::patch::{Hole, Patch};
@@ -458,7 +457,9 @@ impl Grown {
         let total: f64 = self
             .known
             .iter()
-            .map(|&p| nearest(&bvh, &tris, p, start))
+            .map(|&p| {
+                closest_on_triangles(&bvh, &tris, p, start).map_or(f64::INFINITY, |q| (q - p).length())
+            })
             .sum();
         total / self.known.len() as f64
     }
@@ -498,29 +499,6 @@ impl UnionFind {
             self.parent.insert(ra, rb);
         }
     }
-}
-
-/// Distance from `p` to the nearest of `tris`: boxes of radius `r`, doubled until
-/// the nearest triangle found lies within the box.
-fn nearest(bvh: &Bvh, tris: &[[DVec3; 3]], p: DVec3, mut r: f64) -> f64 {
-    for _ in 0..64 {
-        let mut best = f64::INFINITY;
-        let lo = p - DVec3::splat(r);
-        let hi = p + DVec3::splat(r);
-        bvh.query(lo, hi, |i| {
-            let [a, b, c] = tris[i];
-            best = best.min((closest_point_on_triangle(p, a, b, c) - p).length());
-            false
-        });
-        if best <= r {
-            return best;
-        }
-        r *= 2.0;
-    }
-    // not reached for finite input: 64 doublings span every finite distance
-    tris.iter()
-        .map(|&[a, b, c]| (closest_point_on_triangle(p, a, b, c) - p).length())
-        .fold(f64::INFINITY, f64::min)
 }
 
 fn ms_since(t: Instant) -> f64 {

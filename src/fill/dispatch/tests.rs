@@ -68,6 +68,7 @@ fn a_proposal_that_meets_an_earlier_patch_fails_over_to_the_next_method() {
         selection: None,
         tried: Vec::new(),
         accepted: Some((0, tall, q, 0.0)),
+        blend: None,
         ms: 0.0,
     };
     let rep = finish_hole(&mut m, &low, &policy, &mut chk, proposal);

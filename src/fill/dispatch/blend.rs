@@ -1,0 +1,207 @@
+//! The accepted patch pulled toward a second method's surface (`[blend]`; not from the
+//! four papers, issue 19).
+//!
+//! Where the lost surface bends, the thin plate (`min_area_fair`) tends to flatten it
+//! and the wavefront's rows to carry the rim's slope on too far, so their errors are
+//! often of opposite sign and their mean is closer than either. The hole is filled
+//! again by `blend.with` (its own fill, without relaxation, checks or variants: only
+//! its surface is read), each new vertex of the accepted patch moves `blend.weight` of
+//! the way to the closest point of that patch, and the moved patch must pass the same
+//! checks as any patch, or the accepted one is kept. The connectivity, the loop and the
+//! input are untouched. Measured in docs/measurements.md.
+
+use super::{guarded, run_method_unchecked};
+use crate::check::Checker;
+use crate::fill::kit::{Deadline, FillContext};
+use crate::geometry::bvh::{closest_on_triangles, tri_box, Bvh};
+use crate::mesh::Mesh;
+use crate::patch::{Hole, Patch};
+use crate::policy::{Method, Policy};
+use crate::report::{BlendReport, HoleClass, PatchQuality};
+use glam::DVec3;
+use std::time::Instant;
+
+/// Whether `[blend]` applies to a patch of `method` on `hole`: blending is on, the
+/// hole is middle or large, and the patch is another method's and has new vertices.
+pub fn applies(policy: &Policy, hole: &Hole, method: Method, patch: &Patch) -> bool {
+    policy.blend.weight > 0.0
+        && hole.class != HoleClass::Small
+        && method != policy.blend.with
+        && !patch.new_vertices.is_empty()
+}
+
+/// `patch` (accepted, by another method) pulled toward `blend.with`'s patch of the same
+/// hole, with its quality when it passes the checks; and what was done.
+pub fn pull(
+    mesh: &Mesh,
+    hole: &Hole,
+    policy: &Policy,
+    checker: &Checker,
+    patch: &Patch,
+) -> (Option<(Patch, PatchQuality)>, BlendReport) {
+    let t0 = Instant::now();
+    let with = policy.blend.with;
+    let mut rep = BlendReport {
+        with,
+        weight: policy.blend.weight,
+        applied: false,
+        reason: String::new(),
+        moved_vertices: 0,
+        mean_shift: 0.0,
+        ms: 0.0,
+    };
+    let ctx = FillContext {
+        mesh,
+        hole,
+        policy,
+        deadline: Deadline::after_ms(policy.limits.hole_time_ms),
+        checker: None,
+        rim_bound: false,
+    };
+    let result = match guarded(with, || run_method_unchecked(with, &ctx)) {
+        Ok(guide) => moved(mesh, hole, policy.blend.weight, patch, &guide).ok_or_else(|| {
+            format!("{} made no triangle to pull toward", with.name())
+        }),
+        Err(why) => Err(format!("{} failed: {why}", with.name())),
+    };
+    let out = match result {
+        Ok((p, shift)) => {
+            rep.moved_vertices = p.new_vertices.len();
+            rep.mean_shift = shift / hole.mean_edge_length.max(f64::MIN_POSITIVE);
+            match checker.check_patch(mesh, &hole.vertices, &p, &policy.checks) {
+                Ok(q) => {
+                    rep.applied = true;
+                    Some((p, q))
+                }
+                Err(why) => {
+                    rep.reason = format!("the pulled patch failed the checks: {why}");
+                    None
+                }
+            }
+        }
+        Err(why) => {
+            rep.reason = why;
+            None
+        }
+    };
+    rep.ms = t0.elapsed().as_secs_f64() * 1000.0;
+    (out, rep)
+}
+
+/// `patch` with each new vertex moved `weight` of the way to the closest point of
+/// `guide`'s triangles, and the mean distance moved; `None` when `guide` has none.
+pub fn moved(
+    mesh: &Mesh,
+    hole: &Hole,
+    weight: f64,
+    patch: &Patch,
+    guide: &Patch,
+) -> Option<(Patch, f64)> {
+    let k = hole.len();
+    let pos = |i: u32| -> Option<DVec3> {
+        let i = i as usize;
+        if i < k {
+            hole.vertices.get(i).map(|&v| mesh.pos(v))
+        } else {
+            guide.new_vertices.get(i - k).copied()
+        }
+    };
+    let tris: Vec<[DVec3; 3]> = guide
+        .triangles
+        .iter()
+        .filter_map(|t| Some([pos(t[0])?, pos(t[1])?, pos(t[2])?]))
+        .collect();
+    if tris.is_empty() {
+        return None;
+    }
+    let bvh = Bvh::build(tris.len(), |i| tri_box(&tris[i]));
+    let r = hole.mean_edge_length;
+    let mut out = patch.clone();
+    let mut total = 0.0;
+    for p in &mut out.new_vertices {
+        if let Some(q) = closest_on_triangles(&bvh, &tris, *p, r) {
+            let d = weight * (q - *p);
+            total += d.length();
+            *p += d;
+        }
+    }
+    let n = out.new_vertices.len().max(1) as f64;
+    Some((out, total / n))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testutil::{fan, sheet, sheet_hole_at, SHEET_HOLE};
+
+    /// The 8-vertex hole of a flat sheet, as a hole of `class`.
+    fn sheet_hole(class: HoleClass) -> (Mesh, Hole) {
+        let (mesh, _) = Mesh::from_raw(&sheet(6, 0.0, &SHEET_HOLE));
+        let lp = sheet_hole_at(&mesh, 0.0);
+        let mut hole = Hole::new(0, &mesh, lp, &Policy::default());
+        hole.class = class;
+        (mesh, hole)
+    }
+
+    /// A fan over the hole, apex at height `h` above its middle.
+    fn tent(h: f64) -> Patch {
+        fan(8, DVec3::new(3.0, 3.0, h))
+    }
+
+    #[test]
+    fn the_apex_moves_the_weighted_way_to_the_other_surface() {
+        let (mesh, hole) = sheet_hole(HoleClass::Middle);
+        for (w, want) in [(0.0, 0.4), (0.5, 0.25), (1.0, 0.1)] {
+            let (p, shift) = moved(&mesh, &hole, w, &tent(0.4), &tent(0.1)).expect("guide");
+            let z = p.new_vertices[0].z;
+            assert!((z - want).abs() < 1e-12, "weight {w}: apex at {z}");
+            assert!((shift - w * 0.3).abs() < 1e-12, "weight {w}: shift {shift}");
+            assert_eq!(p.triangles, tent(0.4).triangles, "connectivity kept");
+        }
+    }
+
+    #[test]
+    fn a_guide_without_triangles_moves_nothing() {
+        let (mesh, hole) = sheet_hole(HoleClass::Middle);
+        assert!(moved(&mesh, &hole, 0.5, &tent(0.4), &Patch::default()).is_none());
+        // triangles naming vertices the guide does not have are left out
+        let broken = Patch {
+            new_vertices: Vec::new(),
+            triangles: vec![[0, 1, 9]],
+        };
+        assert!(moved(&mesh, &hole, 0.5, &tent(0.4), &broken).is_none());
+    }
+
+    #[test]
+    fn the_pulled_patch_is_checked_and_reported() {
+        let (mut mesh, hole) = sheet_hole(HoleClass::Middle);
+        let policy = Policy::default()
+            .edit(|s| s.blend.weight = 0.5)
+            .expect("valid");
+        let checker = Checker::new(&mesh);
+        // the wavefront fills a flat hole flat: the tent comes down halfway
+        let (out, rep) = pull(&mesh, &hole, &policy, &checker, &tent(0.4));
+        let (p, _) = out.expect("applied");
+        assert!(rep.applied, "{rep:?}");
+        assert_eq!(rep.with, Method::Wavefront);
+        assert_eq!(rep.moved_vertices, 1);
+        assert!((p.new_vertices[0].z - 0.2).abs() < 1e-9, "{:?}", p.new_vertices);
+        crate::patch::apply_patch(&mut mesh, &hole, &p).expect("applies");
+        mesh.validate().expect("valid mesh");
+    }
+
+    #[test]
+    fn blending_applies_only_to_another_methods_patch_of_a_larger_hole() {
+        let on = Policy::default()
+            .edit(|s| s.blend.weight = 0.5)
+            .expect("valid");
+        let (_, small) = sheet_hole(HoleClass::Small);
+        let (_, large) = sheet_hole(HoleClass::Large);
+        let patch = tent(0.3);
+        assert!(!applies(&on, &small, Method::MinAreaFair, &patch));
+        assert!(applies(&on, &large, Method::MinAreaFair, &patch));
+        assert!(!applies(&on, &large, Method::Wavefront, &patch), "the guide's own patch");
+        assert!(!applies(&on, &large, Method::MinAreaFair, &Patch::default()));
+        assert!(!applies(&Policy::default(), &large, Method::MinAreaFair, &patch), "off");
+    }
+}
