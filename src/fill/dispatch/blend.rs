@@ -12,7 +12,7 @@
 
 use super::{guarded, run_method_unchecked};
 use crate::check::Checker;
-use crate::fill::kit::{Deadline, FillContext};
+use crate::fill::kit::{relax, Deadline, FillContext};
 use crate::geometry::bvh::{closest_on_triangles, tri_box, Bvh};
 use crate::mesh::Mesh;
 use crate::patch::{Hole, Patch};
@@ -68,8 +68,19 @@ pub fn pull(
         Ok((p, shift)) => {
             rep.moved_vertices = p.new_vertices.len();
             rep.mean_shift = shift / hole.mean_edge_length.max(f64::MIN_POSITIVE);
-            match checker.check_patch(mesh, &hole.vertices, &p, &policy.checks) {
-                Ok(q) => {
+            let check = |p: &Patch| checker.check_patch(mesh, &hole.vertices, p, &policy.checks);
+            // the moves are uneven, so the triangles are evened out again as after
+            // any method; the unrelaxed patch is the fallback
+            let relaxed = relax::relax_checked(
+                mesh,
+                hole,
+                &p,
+                policy.fair.tangential_relax,
+                relax::RELAX_STEP,
+                check,
+            );
+            match relaxed.map_or_else(|| check(&p).map(|q| (p, q)), Ok) {
+                Ok((p, q)) => {
                     rep.applied = true;
                     Some((p, q))
                 }
