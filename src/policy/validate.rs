@@ -463,6 +463,9 @@ where
     if x >= lo {
         Ok(())
     } else {
-        Err(Invalid::new(key, format!("must be at least {lo} (got {x})")))
+        Err(Invalid::new(
+            key,
+            format!("must be at least {lo} (got {x})"),
+        ))
     }
 }

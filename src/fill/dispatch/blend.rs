@@ -59,9 +59,8 @@ pub fn pull(
         rim_bound: false,
     };
     let result = match guarded(with, || run_method_unchecked(with, &ctx)) {
-        Ok(guide) => moved(mesh, hole, policy.blend.weight, patch, &guide).ok_or_else(|| {
-            format!("{} made no triangle to pull toward", with.name())
-        }),
+        Ok(guide) => moved(mesh, hole, policy.blend.weight, patch, &guide)
+            .ok_or_else(|| format!("{} made no triangle to pull toward", with.name())),
         Err(why) => Err(format!("{} failed: {why}", with.name())),
     };
     let out = match result {
@@ -196,7 +195,11 @@ mod tests {
         assert!(rep.applied, "{rep:?}");
         assert_eq!(rep.with, Method::Wavefront);
         assert_eq!(rep.moved_vertices, 1);
-        assert!((p.new_vertices[0].z - 0.2).abs() < 1e-9, "{:?}", p.new_vertices);
+        assert!(
+            (p.new_vertices[0].z - 0.2).abs() < 1e-9,
+            "{:?}",
+            p.new_vertices
+        );
         crate::patch::apply_patch(&mut mesh, &hole, &p).expect("applies");
         mesh.validate().expect("valid mesh");
     }
@@ -211,8 +214,19 @@ mod tests {
         let patch = tent(0.3);
         assert!(!applies(&on, &small, Method::MinAreaFair, &patch));
         assert!(applies(&on, &large, Method::MinAreaFair, &patch));
-        assert!(!applies(&on, &large, Method::Wavefront, &patch), "the guide's own patch");
-        assert!(!applies(&on, &large, Method::MinAreaFair, &Patch::default()));
-        assert!(!applies(&Policy::default(), &large, Method::MinAreaFair, &patch), "off");
+        assert!(
+            !applies(&on, &large, Method::Wavefront, &patch),
+            "the guide's own patch"
+        );
+        assert!(!applies(
+            &on,
+            &large,
+            Method::MinAreaFair,
+            &Patch::default()
+        ));
+        assert!(
+            !applies(&Policy::default(), &large, Method::MinAreaFair, &patch),
+            "off"
+        );
     }
 }

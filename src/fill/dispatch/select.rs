@@ -458,7 +458,8 @@ impl Grown {
             .known
             .iter()
             .map(|&p| {
-                closest_on_triangles(&bvh, &tris, p, start).map_or(f64::INFINITY, |q| (q - p).length())
+                closest_on_triangles(&bvh, &tris, p, start)
+                    .map_or(f64::INFINITY, |q| (q - p).length())
             })
             .sum();
         total / self.known.len() as f64
