@@ -6,8 +6,9 @@
 //! often of opposite sign and their mean is closer than either. The hole is filled
 //! again by `blend.with` (its own fill, without relaxation, checks or variants: only
 //! its surface is read), each new vertex of the accepted patch moves `blend.weight` of
-//! the way to the closest point of that patch, and the moved patch must pass the same
-//! checks as any patch, or the accepted one is kept. The connectivity, the loop and the
+//! the way to the closest point of that patch, and the moved patch is relaxed
+//! tangentially and must pass the same checks as any patch, or the accepted one is
+//! kept. The second fill has its own `limits.hole_time_ms`. The connectivity, the loop and the
 //! input are untouched. Measured in docs/measurements.md.
 
 use super::{guarded, run_method_unchecked};
