@@ -13,24 +13,8 @@ import numpy as np
 sys.path.insert(0, os.environ.get("BENCH", os.path.join(os.path.dirname(__file__), "..", "..", "shared", "bench")))
 import metrics, mio, topo
 TS = [0.0, 0.25, 0.5, 0.75, 1.0]
-def patch(base, s, name, Vin, Fin, diag, hole_of_v):
-    ps = [os.path.join(base, "runs", s, name + e) for e in (".obj", ".off", ".ply")]
-    p = [p for p in ps if os.path.exists(p)][0]
-    Vout, Fout = mio.read_mesh(p)
-    vmap = metrics.match_vertices(Vin, Vout, diag)
-    n = len(Vin) + 1
-    mapped = vmap[Fout]; known = np.all(mapped >= 0, 1)
-    kin = metrics.face_keys(Fin, n); kout = np.full(len(Fout), -1, np.int64)
-    kout[known] = metrics.face_keys(mapped[known], n)
-    new = ~(known & np.isin(kout, kin)); newF = Fout[new]
-    used = np.unique(Fout); new_v = used[vmap[used] < 0]
-    rng = np.random.default_rng(0)
-    S, sf = metrics.sample_surface(Vout, newF, metrics.N_SAMPLES, rng, return_faces=True)
-    P = np.concatenate([Vout[new_v], S])
-    flab = metrics.patch_hole_labels(newF, vmap, hole_of_v, len(Vout))
-    vlab = np.full(len(Vout), -1, np.int64); vlab[newF.reshape(-1)] = np.repeat(flab, 3)
-    plab = np.concatenate([vlab[new_v], flab[sf]])
-    return Vout, newF, flab, P, plab
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from perhole import patch_points, reference
 out = sys.argv[1]; A_, B_ = sys.argv[2], sys.argv[3]
 wr = csv.writer(sys.stdout); wr.writerow(["seed", "mesh", "hole", "cat", "w"] + ["t%.2f" % t for t in TS])
 for sd in sorted(os.listdir(out)):
@@ -47,15 +31,12 @@ for sd in sorted(os.listdir(out)):
         hole_of_v = -np.ones(len(Vin), np.int64)
         for h in holes: hole_of_v[h["loop"]] = h["id"]
         VR = np.concatenate([Vg, Vin])
-        Va, Fa, fla, Pa, pla = patch(base, A_, name, Vin, Fin, diag, hole_of_v)
-        Vb, Fb, flb, Pb, plb = patch(base, B_, name, Vin, Fin, diag, hole_of_v)
+        Va, Fa, fla, Pa, pla = patch_points(base, A_, name, Vin, Fin, diag, hole_of_v)
+        Vb, Fb, flb, Pb, plb = patch_points(base, B_, name, Vin, Fin, diag, hole_of_v)
         for h in holes:
             if h["category"] == "small": continue
             i = h["id"]
-            ring = np.asarray(h["loop"])
-            for _ in range(3): ring = np.unique(np.concatenate([ring, A[ring].indices]))
-            near = np.zeros(len(Vin), bool); near[ring] = True
-            FR = np.concatenate([Fg[gids == i], Fin[near[Fin].any(1)] + len(Vg)])
+            FR = reference(Vin, Fin, Vg, Fg, gids, A, h)
             P = Pa[pla == i]; FB = Fb[flb == i]
             if len(P) == 0 or len(FB) == 0: continue
             _, f = metrics.surface_distance(Vb, FB, P)

@@ -44,6 +44,37 @@ def feats(Vin, Fin, A, loop):
                 sharp20=float(np.mean(ang > 20)), sharp40=float(np.mean(ang > 40)), angmean=float(ang.mean()),
                 angmax=float(ang.max()), ndev=float(np.average(dev, weights=area)), ndevmax=float(dev.max()))
 
+def patch_points(base, system, name, Vin, Fin, diag, hole_of_v):
+    """The patch of `system`'s output for mesh `name` as the bench sees it: output
+    vertices, new faces, each new face's hole, the points measured (new vertices, then
+    area samples) and each point's hole; None without an output."""
+    ps = [os.path.join(base, "runs", system, name + e) for e in (".obj", ".off", ".ply")]
+    ps = [p for p in ps if os.path.exists(p)]
+    if not ps: return None
+    Vout, Fout = mio.read_mesh(ps[0])
+    vmap = metrics.match_vertices(Vin, Vout, diag)
+    n = len(Vin) + 1
+    mapped = vmap[Fout]; known = np.all(mapped >= 0, 1)
+    kin = metrics.face_keys(Fin, n); kout = np.full(len(Fout), -1, np.int64)
+    kout[known] = metrics.face_keys(mapped[known], n)
+    new = ~(known & np.isin(kout, kin)); newF = Fout[new]
+    used = np.unique(Fout); new_v = used[vmap[used] < 0]
+    rng = np.random.default_rng(0)
+    S, sf = metrics.sample_surface(Vout, newF, metrics.N_SAMPLES, rng, return_faces=True)
+    P = np.concatenate([Vout[new_v], S])
+    flab = metrics.patch_hole_labels(newF, vmap, hole_of_v, len(Vout))
+    vlab = np.full(len(Vout), -1, np.int64); vlab[newF.reshape(-1)] = np.repeat(flab, 3)
+    plab = np.concatenate([vlab[new_v], flab[sf]])
+    return Vout, newF, flab, P, plab
+
+def reference(Vin, Fin, Vg, Fg, gids, A, h):
+    """The true surface around hole h, as the bench takes it: its ground truth and the
+    input faces within 3 rings of its loop (vertices: Vg then Vin)."""
+    ring = np.asarray(h["loop"])
+    for _ in range(3): ring = np.unique(np.concatenate([ring, A[ring].indices]))
+    near = np.zeros(len(Vin), bool); near[ring] = True
+    return np.concatenate([Fg[gids == h["id"]], Fin[near[Fin].any(1)] + len(Vg)])
+
 def main():
     out, systems = sys.argv[1], sys.argv[2].split(",")
     wr = None
@@ -62,33 +93,13 @@ def main():
             hole_of_v = -np.ones(len(Vin), np.int64)
             for h in holes: hole_of_v[h["loop"]] = h["id"]
             VR = np.concatenate([Vg, Vin])
-            FRs = {}
-            for h in holes:
-                ring = np.asarray(h["loop"])
-                for _ in range(3): ring = np.unique(np.concatenate([ring, A[ring].indices]))
-                near = np.zeros(len(Vin), bool); near[ring] = True
-                FRs[h["id"]] = np.concatenate([Fg[gids == h["id"]], Fin[near[Fin].any(1)] + len(Vg)])
+            FRs = {h["id"]: reference(Vin, Fin, Vg, Fg, gids, A, h) for h in holes}
             ftab = {h["id"]: feats(Vin, Fin, A, h["loop"]) for h in holes}
             ape = {}
             for s in systems:
-                ps = [os.path.join(base, "runs", s, name + e) for e in (".obj", ".off", ".ply")]
-                ps = [p for p in ps if os.path.exists(p)]
-                if not ps: continue
-                p = ps[0]
-                Vout, Fout = mio.read_mesh(p)
-                vmap = metrics.match_vertices(Vin, Vout, diag)
-                n = len(Vin) + 1
-                mapped = vmap[Fout]; known = np.all(mapped >= 0, 1)
-                kin = metrics.face_keys(Fin, n); kout = np.full(len(Fout), -1, np.int64)
-                kout[known] = metrics.face_keys(mapped[known], n)
-                new = ~(known & np.isin(kout, kin)); newF = Fout[new]
-                used = np.unique(Fout); new_v = used[vmap[used] < 0]
-                rng = np.random.default_rng(0)
-                S, sf = metrics.sample_surface(Vout, newF, metrics.N_SAMPLES, rng, return_faces=True)
-                P = np.concatenate([Vout[new_v], S])
-                flab = metrics.patch_hole_labels(newF, vmap, hole_of_v, len(Vout))
-                vlab = np.full(len(Vout), -1, np.int64); vlab[newF.reshape(-1)] = np.repeat(flab, 3)
-                plab = np.concatenate([vlab[new_v], flab[sf]])
+                got = patch_points(base, s, name, Vin, Fin, diag, hole_of_v)
+                if got is None: continue
+                _, _, _, P, plab = got
                 for h in holes:
                     sel = plab == h["id"]
                     if not sel.any(): continue
@@ -104,4 +115,5 @@ def main():
                     wr = csv.DictWriter(sys.stdout, fieldnames=list(row)); wr.writeheader()
                 wr.writerow(row); sys.stdout.flush()
 
-main()
+if __name__ == "__main__":
+    main()

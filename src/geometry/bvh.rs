@@ -426,7 +426,6 @@ pub fn boxes_meet(alo: DVec3, ahi: DVec3, blo: DVec3, bhi: DVec3) -> bool {
         && blo.z <= ahi.z
 }
 
-/// Bounding box of a triangle.
 /// The closest point to `p` on the triangles `tris` (indexed by `bvh`, built over
 /// their boxes): boxes of half-width `r` around `p`, doubled until the closest point
 /// found lies within the box. `None` when there is no triangle.
@@ -454,6 +453,7 @@ pub fn closest_on_triangles(bvh: &Bvh, tris: &[[DVec3; 3]], p: DVec3, r: f64) ->
         .min_by(|x, y| (*x - p).length().total_cmp(&(*y - p).length()))
 }
 
+/// Bounding box of a triangle.
 pub fn tri_box(t: &[DVec3; 3]) -> (DVec3, DVec3) {
     (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]))
 }
