@@ -89,6 +89,26 @@ pub struct Patch {
     pub triangles: Vec<[u32; 3]>,
 }
 
+impl Patch {
+    /// The corners of each triangle, loop vertices read from `mesh`; a triangle that
+    /// names a vertex neither the loop nor the patch has is left out.
+    pub fn triangle_positions(&self, mesh: &Mesh, hole: &Hole) -> Vec<[DVec3; 3]> {
+        let k = hole.vertices.len();
+        let pos = |i: u32| -> Option<DVec3> {
+            let i = i as usize;
+            if i < k {
+                Some(mesh.pos(hole.vertices[i]))
+            } else {
+                self.new_vertices.get(i - k).copied()
+            }
+        };
+        self.triangles
+            .iter()
+            .filter_map(|t| Some([pos(t[0])?, pos(t[1])?, pos(t[2])?]))
+            .collect()
+    }
+}
+
 /// Why a patch could not be applied (the mesh is left as it was).
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 pub enum ApplyError {

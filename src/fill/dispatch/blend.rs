@@ -108,20 +108,7 @@ pub fn moved(
     patch: &Patch,
     guide: &Patch,
 ) -> Option<(Patch, f64)> {
-    let k = hole.len();
-    let pos = |i: u32| -> Option<DVec3> {
-        let i = i as usize;
-        if i < k {
-            hole.vertices.get(i).map(|&v| mesh.pos(v))
-        } else {
-            guide.new_vertices.get(i - k).copied()
-        }
-    };
-    let tris: Vec<[DVec3; 3]> = guide
-        .triangles
-        .iter()
-        .filter_map(|t| Some([pos(t[0])?, pos(t[1])?, pos(t[2])?]))
-        .collect();
+    let tris = guide.triangle_positions(mesh, hole);
     if tris.is_empty() {
         return None;
     }

@@ -435,20 +435,7 @@ impl Grown {
 
     /// Mean distance from the known points to `patch` (a patch of the grown hole).
     fn mean_distance(&self, patch: &Patch) -> f64 {
-        let k = self.hole.len();
-        let pos = |i: u32| -> DVec3 {
-            let i = i as usize;
-            if i < k {
-                self.mesh.pos(self.hole.vertices[i])
-            } else {
-                patch.new_vertices.get(i - k).copied().unwrap_or(DVec3::NAN)
-            }
-        };
-        let tris: Vec<[DVec3; 3]> = patch
-            .triangles
-            .iter()
-            .map(|t| [pos(t[0]), pos(t[1]), pos(t[2])])
-            .collect();
+        let tris = patch.triangle_positions(&self.mesh, &self.hole);
         if tris.is_empty() {
             return f64::INFINITY;
         }
