@@ -19,7 +19,6 @@ use crate::mesh::Mesh;
 use crate::patch::{Hole, Patch};
 use crate::policy::{Method, Policy};
 use crate::report::{BlendReport, HoleClass, PatchQuality};
-use glam::DVec3;
 use std::time::Instant;
 
 /// Whether `[blend]` applies to a patch of `method` on `hole`: blending is on, the
@@ -131,6 +130,7 @@ pub fn moved(
 mod tests {
     use super::*;
     use crate::testutil::{fan, sheet, sheet_hole_at, SHEET_HOLE};
+    use glam::DVec3;
 
     /// The 8-vertex hole of a flat sheet, as a hole of `class`.
     fn sheet_hole(class: HoleClass) -> (Mesh, Hole) {
