@@ -37,11 +37,9 @@ fn kill_at_then_restart(f: &Folders, point: &str) {
         d2.log()
     );
     assert!(
-        wait_files(
-            &f.outbox,
-            &["x.obj", "x.obj.repair.json", "x.obj.repair.png"]
-        ),
-        "{point}\n{}",
+        published_once(&f.outbox, "x.obj"),
+        "{point}: {:?}\n{}",
+        Folders::files(&f.outbox),
         d2.log()
     );
     assert_eq!(

@@ -334,6 +334,20 @@ pub fn wait_files(dir: &Path, want: &[&str]) -> bool {
     wait_until(Duration::from_secs(30), || Folders::files(dir) == want)
 }
 
+/// Whether `dir` comes to hold the model `name` and its log, once, and its picture or
+/// not: the picture is drawn by a daemon's child after the model, at the lowest CPU
+/// priority, so a daemon killed while publishing may die before it is drawn (its
+/// successor publishes it when it is there and never draws it again). Waits up to 30 s.
+pub fn published_once(dir: &Path, name: &str) -> bool {
+    let picture = format!("{name}.repair.png");
+    let want = [name.to_string(), format!("{name}.repair.json")];
+    wait_until(Duration::from_secs(30), || {
+        let mut files = Folders::files(dir);
+        files.retain(|n| *n != picture);
+        files == want
+    })
+}
+
 pub fn wait_until(timeout: Duration, mut cond: impl FnMut() -> bool) -> bool {
     let t = Instant::now();
     loop {
