@@ -18,6 +18,7 @@ from perhole import patch_points, reference
 out = sys.argv[1]; A_, B_ = sys.argv[2], sys.argv[3]
 wr = csv.writer(sys.stdout); wr.writerow(["seed", "mesh", "hole", "cat", "w"] + ["t%.2f" % t for t in TS])
 for sd in sorted(os.listdir(out)):
+    if not sd.startswith("seed-"): continue
     seed = int(sd[5:]); base = os.path.join(out, sd)
     for name in sorted(os.listdir(os.path.join(base, "holes"))):
         hd = os.path.join(base, "holes", name)

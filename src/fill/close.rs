@@ -78,6 +78,7 @@ pub fn fill_checked(ctx: &FillContext) -> Result<(Patch, Option<PatchQuality>), 
             weight,
             min_angle: 0.0,
             restricted_above: ctx.policy.refine.restricted_search_above,
+            delaunay: ctx.policy.refine.search == crate::policy::Search::Delaunay,
             deadline: ctx.deadline,
         };
         if let Ok(tris) = triangulate::triangulate(&inp) {

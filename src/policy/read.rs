@@ -49,7 +49,10 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
     ("crack", &["stitch", "tolerance"]),
     ("islands", &["mode", "remove_below_faces"]),
     ("debris", &["remove_below_faces"]),
-    ("refine", &["density", "weight", "restricted_search_above"]),
+    (
+        "refine",
+        &["density", "weight", "restricted_search_above", "search"],
+    ),
     (
         "fair",
         &["continuity", "weights", "tangential_relax", "passes"],
@@ -382,6 +385,7 @@ impl Reader<'_> {
             ("refine", "restricted_search_above") => {
                 p.refine.restricted_search_above = self.usize(key, v)?
             }
+            ("refine", "search") => p.refine.search = self.named(key, v)?,
             ("fair", "continuity") => {
                 let n = self.uint(key, v)?;
                 p.fair.continuity = u8::try_from(n)

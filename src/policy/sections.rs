@@ -268,6 +268,24 @@ pub struct Refine {
     pub weight: TriangulationWeight,
     /// Loops with more vertices than this use the restricted triangulation search.
     pub restricted_search_above: usize,
+    /// The search space of the exhaustive triangulation (loops up to
+    /// `restricted_search_above` vertices).
+    pub search: Search,
+}
+
+/// Where the initial triangulation of a loop up to `refine.restricted_search_above`
+/// vertices is searched.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum Search {
+    /// Every triangulation of the loop.
+    Full,
+    /// Among the edges of the loop's 3D Delaunay triangulation, as CGAL does; every
+    /// triangulation when none is found there.
+    Delaunay,
+    /// `min_area_fair` makes its patch from both and keeps the one of larger area;
+    /// the other methods search every triangulation.
+    Both,
 }
 
 impl Default for Refine {
@@ -276,6 +294,7 @@ impl Default for Refine {
             density: std::f64::consts::SQRT_2,
             weight: TriangulationWeight::DihedralArea,
             restricted_search_above: 400,
+            search: Search::Full,
         }
     }
 }
@@ -594,6 +613,17 @@ pub trait PolicyName: Copy + 'static {
     const VALUES: &'static [Self];
     /// The policy spelling.
     fn policy_name(self) -> &'static str;
+}
+
+impl PolicyName for Search {
+    const VALUES: &'static [Search] = &[Search::Full, Search::Delaunay, Search::Both];
+    fn policy_name(self) -> &'static str {
+        match self {
+            Search::Full => "full",
+            Search::Delaunay => "delaunay",
+            Search::Both => "both",
+        }
+    }
 }
 
 impl PolicyName for TriangulationWeight {

@@ -639,6 +639,7 @@ prop_compose! {
         split_long_edges in prop_oneof![Just(0.0f64), 1.0f64..100.0],
         density in prop_oneof![Just(0.0f64), 1.0f64..=4.0],
         weight in arb_name::<TriangulationWeight>(), restricted_search_above in 3usize..=2000,
+        search in arb_name::<Search>(),
         continuity in 0u8..=3, fair_weights in arb_name::<Weights>(),
         angles in (0.001f64..179.0).prop_flat_map(|a| (Just(a), (a + 0.5)..179.99)),
         alpha in 0.0f64..=1.0, omega1 in 0.0f64..=1.0, merge_distance in 0.0f64..=1.0,
@@ -656,7 +657,7 @@ prop_compose! {
             dispatch: Dispatch { small_max, middle_max: small_max + extra, small, middle, large },
             border: Border { max_vertices, max_bbox_share, min_area_share: 0.25, only_longest },
             clean: Clean { remove_teeth, split_long_edges },
-            refine: Refine { density, weight, restricted_search_above },
+            refine: Refine { density, weight, restricted_search_above, search },
             fair: Fair { continuity, weights: fair_weights, tangential_relax: 100, passes: 2 },
             front: Front {
                 angle_small: angles.0, angle_large: angles.1, alpha, omega1, merge_distance,

@@ -32,7 +32,7 @@
 
 use super::{Deadline, FillError};
 use crate::fasthash::{HashMap, HashSet};
-use crate::geometry::measure;
+use crate::geometry::{delaunay3, measure};
 use crate::mesh::{Mesh, VertexId};
 use crate::policy::TriangulationWeight;
 use glam::DVec3;
@@ -91,6 +91,9 @@ pub struct LoopInput<'a> {
     pub min_angle: f64,
     /// Loops above this size use the restricted search.
     pub restricted_above: usize,
+    /// Loops up to `restricted_above` are searched among the edges of their 3D
+    /// Delaunay triangulation first (`refine.search = "delaunay"`).
+    pub delaunay: bool,
     pub deadline: Deadline,
 }
 
@@ -212,6 +215,11 @@ pub fn triangulate(inp: &LoopInput) -> Result<Vec<[u32; 3]>, FillError> {
     }
     let all: Vec<u32> = (0..k as u32).collect();
     if k <= inp.restricted_above.max(3) && k <= EXACT_MAX {
+        if inp.delaunay {
+            if let Some(t) = delaunay_search(inp)? {
+                return Ok(t);
+            }
+        }
         return exact(inp, &all);
     }
     match restricted(inp)? {
@@ -409,15 +417,40 @@ fn cdt_candidates(inp: &LoopInput) -> Option<Vec<(u32, u32)>> {
 /// The dynamic programme over the CDT candidate edges. `Ok(None)`: not applicable or
 /// nothing found (the caller falls back to divide and conquer).
 fn restricted(inp: &LoopInput) -> Result<Option<Vec<[u32; 3]>>, FillError> {
-    let k = inp.k() as u32;
     let Some(cand) = cdt_candidates(inp) else {
         return Ok(None);
     };
+    restricted_over(inp, &cand)
+}
+
+/// The dynamic programme over the edges of the loop's 3D Delaunay triangulation
+/// ([`crate::geometry::delaunay3`]) and the loop's own edges, CGAL's default search
+/// space. `Ok(None)`: no Delaunay triangulation, or no triangulation of the loop among
+/// its edges (the caller searches every one).
+fn delaunay_search(inp: &LoopInput) -> Result<Option<Vec<[u32; 3]>>, FillError> {
+    let k = inp.k() as u32;
+    let Some(mut cand) = delaunay3::delaunay_edges(inp.pts) else {
+        return Ok(None);
+    };
+    cand.extend((0..k - 1).map(|a| (a, a + 1)));
+    cand.push((0, k - 1));
+    cand.sort_unstable();
+    cand.dedup();
+    restricted_over(inp, &cand)
+}
+
+/// The dynamic programme over candidate edges `(a, b)`, `a < b` (loop edges that are
+/// missing cannot be used).
+fn restricted_over(
+    inp: &LoopInput,
+    cand: &[(u32, u32)],
+) -> Result<Option<Vec<[u32; 3]>>, FillError> {
+    let k = inp.k() as u32;
     inp.deadline.check()?;
     // chords (i < j), sorted by span; loop edges are the base cases
     let mut adj: Vec<Vec<u32>> = vec![Vec::new(); k as usize];
     let mut chords: Vec<(u32, u32)> = Vec::new();
-    for &(a, b) in &cand {
+    for &(a, b) in cand {
         let loop_edge = b == a + 1;
         let closing = a == 0 && b == k - 1;
         if !(loop_edge || closing || inp.chord_ok(a, b)) {
@@ -589,6 +622,7 @@ mod tests {
             weight: TriangulationWeight::Area,
             min_angle: 0.0,
             restricted_above: above,
+            delaunay: false,
             deadline: Deadline::none(),
         }
     }
@@ -696,6 +730,30 @@ mod tests {
             assert_disk(k, &t);
             let t = divide(&inp, (0..k as u32).collect()).unwrap();
             assert_disk(k, &t);
+        }
+    }
+
+    #[test]
+    fn the_delaunay_search_uses_delaunay_edges_only() {
+        let f = HashSet::default();
+        for (k, wob) in [(12, 0.0), (40, 0.3), (150, 0.2)] {
+            let pts = circle(k, wob);
+            let o = vec![None; k];
+            let mut inp = input(&pts, &f, &o, 400);
+            inp.weight = TriangulationWeight::DihedralArea;
+            inp.delaunay = true;
+            let t = delaunay_search(&inp).unwrap().expect("a triangulation");
+            assert_disk(k, &t);
+            let edges = delaunay3::delaunay_edges(&pts).unwrap();
+            for t in &t {
+                for c in 0..3 {
+                    let (a, b) = (t[c].min(t[(c + 1) % 3]), t[c].max(t[(c + 1) % 3]));
+                    let side = b == a + 1 || (a == 0 && b as usize == k - 1);
+                    assert!(side || edges.binary_search(&(a, b)).is_ok(), "{a}-{b}");
+                }
+            }
+            // and the whole triangulation takes it
+            assert_eq!(triangulate(&inp).unwrap(), t);
         }
     }
 

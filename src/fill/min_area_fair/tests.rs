@@ -5,7 +5,7 @@ use crate::check::{check_degenerate, check_topology, patch_positions, quality};
 use crate::fill::kit::Deadline;
 use crate::io::RawMesh;
 use crate::patch::{apply_patch, Hole};
-use crate::policy::{Policy, TriangulationWeight, Weights};
+use crate::policy::{Policy, Search, TriangulationWeight, Weights};
 use proptest::prelude::*;
 
 use crate::testutil::{cut_faces, cylinder, icosphere, strip, unit_grid};
@@ -281,6 +281,7 @@ fn thousand_vertex_loops_triangulate() {
                 weight,
                 min_angle: policy.checks.min_angle_deg.to_radians(),
                 restricted_above: policy.refine.restricted_search_above,
+                delaunay: false,
                 deadline: Deadline::none(),
             };
             let tris = triangulate::triangulate(&input).unwrap();
@@ -311,6 +312,7 @@ fn ten_thousand_vertex_loop_triangulates() {
         weight: TriangulationWeight::DihedralArea,
         min_angle: 0.0,
         restricted_above: 60,
+        delaunay: false,
         deadline: Deadline::none(),
     };
     let tris = triangulate::triangulate(&input).unwrap();
@@ -490,4 +492,39 @@ fn the_self_checked_fill_returns_a_checked_patch() {
     assert_eq!(v.len(), 2);
     assert_eq!(v[0].1.refine.weight, TriangulationWeight::DihedralArea);
     assert_eq!(v[1].1.refine.weight, TriangulationWeight::Area);
+}
+
+/// `refine.search = "both"` keeps whichever of the two searches' checked patches has
+/// the larger area; the Delaunay search's patch is a valid patch on the sphere too.
+#[test]
+fn both_searches_keep_the_larger_patch() {
+    let (mesh, hole, policy) = sphere_case(5, 37.0);
+    let made = |search: Search| {
+        let p = policy.edit(|s| s.refine.search = search).unwrap();
+        let ctx = FillContext::new(&mesh, &hole, &p);
+        super::fill_checked(&ctx).unwrap()
+    };
+    let area = |p: &Patch| -> f64 {
+        p.triangle_positions(&mesh, &hole)
+            .iter()
+            .map(|t| measure::tri_area(t[0], t[1], t[2]))
+            .sum()
+    };
+    let (full, delaunay, both) = (
+        made(Search::Full),
+        made(Search::Delaunay),
+        made(Search::Both),
+    );
+    let larger = if area(&delaunay.0) > area(&full.0) {
+        &delaunay
+    } else {
+        &full
+    };
+    assert_eq!(&both, larger);
+    assert!(both.1.is_some(), "checked");
+    let (mean, _) = sphere_error(&delaunay.0, 10.0);
+    assert!(mean < 0.01, "mean radial error {mean}");
+    let mut m = mesh.clone();
+    apply_patch(&mut m, &hole, &delaunay.0).unwrap();
+    m.validate().unwrap();
 }
