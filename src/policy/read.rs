@@ -34,7 +34,7 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
             "flat_method",
         ],
     ),
-    ("blend", &["weight", "with"]),
+    ("blend", &["weight_middle", "weight_large", "with"]),
     (
         "border",
         &[
@@ -368,7 +368,8 @@ impl Reader<'_> {
             ("select", "flat_method") => {
                 p.select.flat_method = self.name_of::<Method>(key, v, "method")?
             }
-            ("blend", "weight") => p.blend.weight = self.float(key, v)?,
+            ("blend", "weight_middle") => p.blend.weight_middle = self.float(key, v)?,
+            ("blend", "weight_large") => p.blend.weight_large = self.float(key, v)?,
             ("blend", "with") => p.blend.with = self.name_of::<Method>(key, v, "method")?,
             ("rim", "trim") => p.rim.trim = self.boolean(key, v)?,
             ("rim", "max_rings") => p.rim.max_rings = self.usize(key, v)?,

@@ -97,9 +97,11 @@ impl Default for Select {
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct Blend {
-    /// How far each new vertex of the accepted patch moves toward the closest point
-    /// of `with`'s patch: 0 off, 1 onto it.
-    pub weight: f64,
+    /// How far each new vertex of a middle hole's accepted patch moves toward the
+    /// closest point of `with`'s patch: 0 off, 1 onto it.
+    pub weight_middle: f64,
+    /// The same for a large hole.
+    pub weight_large: f64,
     /// The second method, run on the same hole (not `fan` or `close`). A patch made by
     /// this method itself is kept as it is.
     pub with: Method,
@@ -108,8 +110,20 @@ pub struct Blend {
 impl Default for Blend {
     fn default() -> Self {
         Blend {
-            weight: 0.0,
+            weight_middle: 0.0,
+            weight_large: 0.0,
             with: Method::Wavefront,
+        }
+    }
+}
+
+impl Blend {
+    /// The weight for a hole of `class` (small holes are never blended: 0).
+    pub fn weight(&self, class: crate::report::HoleClass) -> f64 {
+        match class {
+            crate::report::HoleClass::Small => 0.0,
+            crate::report::HoleClass::Middle => self.weight_middle,
+            crate::report::HoleClass::Large => self.weight_large,
         }
     }
 }

@@ -134,7 +134,8 @@ impl Settings {
             }
         }
 
-        closed("blend.weight", self.blend.weight, 0.0, 1.0)?;
+        closed("blend.weight_middle", self.blend.weight_middle, 0.0, 1.0)?;
+        closed("blend.weight_large", self.blend.weight_large, 0.0, 1.0)?;
         if matches!(self.blend.with, Method::Close | Method::Fan) {
             return Err(Invalid::new(
                 "blend.with",

@@ -5,11 +5,12 @@
 //! and the wavefront's rows to carry the rim's slope on too far, so their errors are
 //! often of opposite sign and their mean is closer than either. The hole is filled
 //! again by `blend.with` (its own fill, without relaxation, checks or variants: only
-//! its surface is read), each new vertex of the accepted patch moves `blend.weight` of
-//! the way to the closest point of that patch, and the moved patch is relaxed
-//! tangentially and must pass the same checks as any patch, or the accepted one is
-//! kept. The second fill has its own `limits.hole_time_ms`. The connectivity, the loop and the
-//! input are untouched. Measured in docs/measurements.md.
+//! its surface is read), each new vertex of the accepted patch moves its class's
+//! weight (`blend.weight_middle`, `blend.weight_large`) of the way to the closest point
+//! of that patch, and the moved patch is relaxed tangentially and must pass the same
+//! checks as any patch, or the accepted one is kept. The second fill has its own
+//! `limits.hole_time_ms`. The connectivity, the loop and the input are untouched.
+//! Measured in docs/measurements.md.
 
 use super::{guarded, run_method_unchecked};
 use crate::check::Checker;
@@ -18,14 +19,14 @@ use crate::geometry::bvh::{closest_on_triangles, tri_box, Bvh};
 use crate::mesh::Mesh;
 use crate::patch::{Hole, Patch};
 use crate::policy::{Method, Policy};
-use crate::report::{BlendReport, HoleClass, PatchQuality};
+use crate::report::{BlendReport, PatchQuality};
 use std::time::Instant;
 
-/// Whether `[blend]` applies to a patch of `method` on `hole`: blending is on, the
-/// hole is middle or large, and the patch is another method's and has new vertices.
+/// Whether `[blend]` applies to a patch of `method` on `hole`: blending is on for the
+/// hole's class (middle or large), and the patch is another method's and has new
+/// vertices.
 pub fn applies(policy: &Policy, hole: &Hole, method: Method, patch: &Patch) -> bool {
-    policy.blend.weight > 0.0
-        && hole.class != HoleClass::Small
+    policy.blend.weight(hole.class) > 0.0
         && method != policy.blend.with
         && !patch.new_vertices.is_empty()
 }
@@ -43,7 +44,7 @@ pub fn pull(
     let with = policy.blend.with;
     let mut rep = BlendReport {
         with,
-        weight: policy.blend.weight,
+        weight: policy.blend.weight(hole.class),
         applied: false,
         reason: String::new(),
         moved_vertices: 0,
@@ -59,7 +60,7 @@ pub fn pull(
         rim_bound: false,
     };
     let result = match guarded(with, || run_method_unchecked(with, &ctx)) {
-        Ok(guide) => moved(mesh, hole, policy.blend.weight, patch, &guide)
+        Ok(guide) => moved(mesh, hole, policy.blend.weight(hole.class), patch, &guide)
             .ok_or_else(|| format!("{} made no triangle to pull toward", with.name())),
         Err(why) => Err(format!("{} failed: {why}", with.name())),
     };
@@ -129,6 +130,7 @@ pub fn moved(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::report::HoleClass;
     use crate::testutil::{fan, sheet, sheet_hole_at, SHEET_HOLE};
     use glam::DVec3;
 
@@ -174,7 +176,10 @@ mod tests {
     fn the_pulled_patch_is_checked_and_reported() {
         let (mut mesh, hole) = sheet_hole(HoleClass::Middle);
         let policy = Policy::default()
-            .edit(|s| s.blend.weight = 0.5)
+            .edit(|s| {
+                s.blend.weight_middle = 0.5;
+                s.blend.weight_large = 0.5;
+            })
             .expect("valid");
         let checker = Checker::new(&mesh);
         // the wavefront fills a flat hole flat: the tent comes down halfway
@@ -195,7 +200,10 @@ mod tests {
     #[test]
     fn blending_applies_only_to_another_methods_patch_of_a_larger_hole() {
         let on = Policy::default()
-            .edit(|s| s.blend.weight = 0.5)
+            .edit(|s| {
+                s.blend.weight_middle = 0.5;
+                s.blend.weight_large = 0.5;
+            })
             .expect("valid");
         let (_, small) = sheet_hole(HoleClass::Small);
         let (_, large) = sheet_hole(HoleClass::Large);
@@ -216,5 +224,14 @@ mod tests {
             !applies(&Policy::default(), &large, Method::MinAreaFair, &patch),
             "off"
         );
+        // each class by its own weight
+        let large_only = Policy::default()
+            .edit(|s| s.blend.weight_large = 0.4)
+            .expect("valid");
+        let (_, middle) = sheet_hole(HoleClass::Middle);
+        assert!(!applies(&large_only, &middle, Method::MinAreaFair, &patch));
+        assert!(applies(&large_only, &large, Method::MinAreaFair, &patch));
+        assert_eq!(large_only.blend.weight(HoleClass::Large), 0.4);
+        assert_eq!(large_only.blend.weight(HoleClass::Small), 0.0);
     }
 }
