@@ -9,7 +9,9 @@
 //! weight (`blend.weight_middle`, `blend.weight_large`) of the way to the closest point
 //! of that patch, and the moved patch is relaxed tangentially and must pass the same
 //! checks as any patch, or the accepted one is kept. The second fill has its own
-//! `limits.hole_time_ms`. The connectivity, the loop and the input are untouched.
+//! `limits.hole_time_ms`, as every attempt has, and is not made where `blend.with` was
+//! tried on the hole before the accepted method and failed. The connectivity, the loop
+//! and the input are untouched.
 //! Measured in docs/measurements.md.
 
 use super::{guarded, run_method_unchecked};
@@ -19,7 +21,7 @@ use crate::geometry::bvh::{closest_on_triangles, tri_box, Bvh};
 use crate::mesh::Mesh;
 use crate::patch::{Hole, Patch};
 use crate::policy::{Method, Policy};
-use crate::report::{BlendReport, PatchQuality};
+use crate::report::{Attempt, BlendReport, PatchQuality};
 use std::time::Instant;
 
 /// Whether `[blend]` applies to a patch of `method` on `hole`: blending is on for the
@@ -29,6 +31,35 @@ pub fn applies(policy: &Policy, hole: &Hole, method: Method, patch: &Patch) -> b
     policy.blend.weight(hole.class) > 0.0
         && method != policy.blend.with
         && !patch.new_vertices.is_empty()
+}
+
+/// Why `blend.with` is not run again on a hole whose earlier attempts are `tried`:
+/// it is among them, so it failed there already (made no patch, or one that failed
+/// the checks, or ran out of time).
+pub fn already_failed(policy: &Policy, tried: &[Attempt]) -> Option<String> {
+    tried
+        .iter()
+        .find(|a| a.method == policy.blend.with)
+        .map(|a| {
+            format!(
+                "{} was tried before on this hole and failed ({:?}); not run again",
+                a.method.name(),
+                a.outcome
+            )
+        })
+}
+
+/// The report of a blend that was not tried, for `reason`.
+pub fn not_tried(policy: &Policy, hole: &Hole, reason: String) -> BlendReport {
+    BlendReport {
+        with: policy.blend.with,
+        weight: policy.blend.weight(hole.class),
+        applied: false,
+        reason,
+        moved_vertices: 0,
+        mean_shift: 0.0,
+        ms: 0.0,
+    }
 }
 
 /// `patch` (accepted, by another method) pulled toward `blend.with`'s patch of the same
@@ -42,15 +73,7 @@ pub fn pull(
 ) -> (Option<(Patch, PatchQuality)>, BlendReport) {
     let t0 = Instant::now();
     let with = policy.blend.with;
-    let mut rep = BlendReport {
-        with,
-        weight: policy.blend.weight(hole.class),
-        applied: false,
-        reason: String::new(),
-        moved_vertices: 0,
-        mean_shift: 0.0,
-        ms: 0.0,
-    };
+    let mut rep = not_tried(policy, hole, String::new());
     let ctx = FillContext {
         mesh,
         hole,
@@ -195,6 +218,33 @@ mod tests {
         );
         crate::patch::apply_patch(&mut mesh, &hole, &p).expect("applies");
         mesh.validate().expect("valid mesh");
+    }
+
+    #[test]
+    fn a_guide_that_failed_on_the_hole_is_not_run_again() {
+        use crate::report::Outcome;
+        let policy = Policy::default()
+            .edit(|s| s.blend.weight_large = 0.5)
+            .expect("valid");
+        let failed = |method| Attempt {
+            method,
+            outcome: Outcome::Rejected,
+            reason: "a self-intersection".into(),
+            ms: 1.0,
+        };
+        assert_eq!(already_failed(&policy, &[]), None);
+        assert_eq!(
+            already_failed(&policy, &[failed(Method::AdvancingFront)]),
+            None
+        );
+        let why = already_failed(&policy, &[failed(Method::Wavefront)]).expect("skipped");
+        assert!(
+            why.contains("wavefront") && why.contains("Rejected"),
+            "{why}"
+        );
+        let (_, large) = sheet_hole(HoleClass::Large);
+        let rep = not_tried(&policy, &large, why);
+        assert!(!rep.applied && rep.weight == 0.5 && rep.moved_vertices == 0);
     }
 
     #[test]
