@@ -1,7 +1,7 @@
 //! The edges of the 3D Delaunay triangulation of a small point set: the search space
-//! CGAL's `triangulate_hole` restricts its minimum-weight triangulation to by default
-//! (`use_delaunay_triangulation`, after Liepa 2003, "Filling holes in meshes", §3,
-//! which suggests restricting the search to Delaunay facets).
+//! CGAL's `triangulate_hole` restricts its minimum-weight triangulation (Liepa 2003,
+//! "Filling holes in meshes") to by default (`use_delaunay_triangulation`), not from
+//! the four papers; measured in docs/measurements.md.
 //!
 //! Bowyer–Watson insertion into a bounding tetrahedron, deciding by Shewchuk's exact
 //! `orient3d` and `insphere` (`robust`). A hole's loop is often degenerate for a 3D

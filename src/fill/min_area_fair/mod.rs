@@ -261,7 +261,9 @@ const COLLAPSE_RATIO: f64 = 0.75;
 /// which refinement and fairing keep) makes a smaller patch than one that follows it.
 /// Read off CGAL's two searches on the bench (seeds 1-5, nine meshes, 284 middle and
 /// large holes): they differ by up to 2x per hole, either way, and the larger patch is
-/// the closer one on 77 % of the large holes where they differ.
+/// the closer one on 77 % of the large holes where they differ. Ours differ less (the
+/// relaxation and refairing re-mesh the patch) and the larger is the closer on 23 of
+/// 36: no gain measured (docs/measurements.md), so it is an option, off by default.
 pub fn fill_checked(ctx: &FillContext) -> Result<(Patch, Option<PatchQuality>), FillError> {
     if ctx.policy.refine.search != Search::Both {
         return retry::first_passing_at(ctx, &variants(ctx.policy), |_, c| fill(c));
@@ -346,7 +348,7 @@ pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
         weight: ctx.policy.refine.weight,
         min_angle: ctx.policy.checks.min_angle_deg.max(0.0).to_radians(),
         restricted_above: ctx.policy.refine.restricted_search_above,
-        delaunay: ctx.policy.refine.search == crate::policy::Search::Delaunay,
+        delaunay: ctx.policy.refine.search == Search::Delaunay,
         deadline: ctx.deadline,
     };
     let t0 = std::time::Instant::now();
