@@ -117,17 +117,6 @@ impl Default for Blend {
     }
 }
 
-impl Blend {
-    /// The weight for a hole of `class` (small holes are never blended: 0).
-    pub fn weight(&self, class: crate::report::HoleClass) -> f64 {
-        match class {
-            crate::report::HoleClass::Small => 0.0,
-            crate::report::HoleClass::Middle => self.weight_middle,
-            crate::report::HoleClass::Large => self.weight_large,
-        }
-    }
-}
-
 /// Which boundary loops are the outer border of an open scan (skipped, not filled).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]

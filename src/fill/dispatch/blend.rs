@@ -21,14 +21,24 @@ use crate::geometry::bvh::{closest_on_triangles, tri_box, Bvh};
 use crate::mesh::Mesh;
 use crate::patch::{Hole, Patch};
 use crate::policy::{Method, Policy};
-use crate::report::{Attempt, BlendReport, PatchQuality};
+use crate::report::{Attempt, BlendReport, HoleClass, PatchQuality};
 use std::time::Instant;
+
+/// The blend weight of a hole of `class` (`blend.weight_middle`, `blend.weight_large`;
+/// small holes are never blended: 0).
+pub fn weight(policy: &Policy, class: HoleClass) -> f64 {
+    match class {
+        HoleClass::Small => 0.0,
+        HoleClass::Middle => policy.blend.weight_middle,
+        HoleClass::Large => policy.blend.weight_large,
+    }
+}
 
 /// Whether `[blend]` applies to a patch of `method` on `hole`: blending is on for the
 /// hole's class (middle or large), and the patch is another method's and has new
 /// vertices.
 pub fn applies(policy: &Policy, hole: &Hole, method: Method, patch: &Patch) -> bool {
-    policy.blend.weight(hole.class) > 0.0
+    weight(policy, hole.class) > 0.0
         && method != policy.blend.with
         && !patch.new_vertices.is_empty()
 }
@@ -53,7 +63,7 @@ pub fn already_failed(policy: &Policy, tried: &[Attempt]) -> Option<String> {
 pub fn not_tried(policy: &Policy, hole: &Hole, reason: String) -> BlendReport {
     BlendReport {
         with: policy.blend.with,
-        weight: policy.blend.weight(hole.class),
+        weight: weight(policy, hole.class),
         applied: false,
         reason,
         moved_vertices: 0,
@@ -83,7 +93,7 @@ pub fn pull(
         rim_bound: false,
     };
     let result = match guarded(with, || run_method_unchecked(with, &ctx)) {
-        Ok(guide) => moved(mesh, hole, policy.blend.weight(hole.class), patch, &guide)
+        Ok(guide) => moved(mesh, hole, weight(policy, hole.class), patch, &guide)
             .ok_or_else(|| format!("{} made no triangle to pull toward", with.name())),
         Err(why) => Err(format!("{} failed: {why}", with.name())),
     };
@@ -153,7 +163,6 @@ pub fn moved(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::report::HoleClass;
     use crate::testutil::{fan, sheet, sheet_hole_at, SHEET_HOLE};
     use glam::DVec3;
 
@@ -281,7 +290,7 @@ mod tests {
         let (_, middle) = sheet_hole(HoleClass::Middle);
         assert!(!applies(&large_only, &middle, Method::MinAreaFair, &patch));
         assert!(applies(&large_only, &large, Method::MinAreaFair, &patch));
-        assert_eq!(large_only.blend.weight(HoleClass::Large), 0.4);
-        assert_eq!(large_only.blend.weight(HoleClass::Small), 0.0);
+        assert_eq!(weight(&large_only, HoleClass::Large), 0.4);
+        assert_eq!(weight(&large_only, HoleClass::Small), 0.0);
     }
 }
