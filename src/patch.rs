@@ -107,6 +107,14 @@ impl Patch {
             .filter_map(|t| Some([pos(t[0])?, pos(t[1])?, pos(t[2])?]))
             .collect()
     }
+
+    /// Total area of the triangles of [`Patch::triangle_positions`].
+    pub fn area(&self, mesh: &Mesh, hole: &Hole) -> f64 {
+        self.triangle_positions(mesh, hole)
+            .iter()
+            .map(|t| crate::geometry::measure::tri_area(t[0], t[1], t[2]))
+            .sum()
+    }
 }
 
 /// Why a patch could not be applied (the mesh is left as it was).

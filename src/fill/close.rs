@@ -78,7 +78,7 @@ pub fn fill_checked(ctx: &FillContext) -> Result<(Patch, Option<PatchQuality>), 
             weight,
             min_angle: 0.0,
             restricted_above: ctx.policy.refine.restricted_search_above,
-            delaunay: ctx.policy.refine.search == crate::policy::Search::Delaunay,
+            delaunay: ctx.policy.refine.delaunay_first(),
             deadline: ctx.deadline,
         };
         if let Ok(tris) = triangulate::triangulate(&inp) {

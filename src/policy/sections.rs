@@ -291,6 +291,14 @@ pub enum Search {
     Both,
 }
 
+impl Refine {
+    /// Whether a loop's triangulation (every method's but `min_area_fair`'s under
+    /// `"both"`, which makes both itself) is searched among its Delaunay edges first.
+    pub fn delaunay_first(&self) -> bool {
+        self.search == Search::Delaunay
+    }
+}
+
 impl Default for Refine {
     fn default() -> Self {
         Refine {

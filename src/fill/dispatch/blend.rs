@@ -72,6 +72,33 @@ pub fn not_tried(policy: &Policy, hole: &Hole, reason: String) -> BlendReport {
     }
 }
 
+/// The accepted `patch` of `method` (quality `q`), after the hole's failed `tried`
+/// attempts, as `[blend]` leaves it: pulled when that applies and passes, else as it
+/// was; with the blend's report when it applies.
+#[allow(clippy::too_many_arguments)]
+pub fn blended(
+    mesh: &Mesh,
+    hole: &Hole,
+    policy: &Policy,
+    checker: &Checker,
+    method: Method,
+    tried: &[Attempt],
+    patch: Patch,
+    q: PatchQuality,
+) -> (Patch, PatchQuality, Option<BlendReport>) {
+    if !applies(policy, hole, method, &patch) {
+        return (patch, q, None);
+    }
+    if let Some(why) = already_failed(policy, tried) {
+        return (patch, q, Some(not_tried(policy, hole, why)));
+    }
+    let (pulled, rep) = pull(mesh, hole, policy, checker, &patch);
+    match pulled {
+        Some((pulled, q)) => (pulled, q, Some(rep)),
+        None => (patch, q, Some(rep)),
+    }
+}
+
 /// `patch` (accepted, by another method) pulled toward `blend.with`'s patch of the same
 /// hole, with its quality when it passes the checks; and what was done.
 pub fn pull(

@@ -184,23 +184,11 @@ pub fn propose(mesh: &Mesh, hole: &Hole, policy: &Policy, checker: &Checker) -> 
     let mut p = propose_from(mesh, hole, policy, checker, order, 0);
     p.selection = selection;
     if let Some((i, patch, q, ms)) = p.accepted.take() {
-        let applies = blend::applies(policy, hole, p.order[i], &patch);
-        p.accepted = Some(match blend::already_failed(policy, &p.tried) {
-            _ if !applies => (i, patch, q, ms),
-            Some(why) => {
-                p.blend = Some(blend::not_tried(policy, hole, why));
-                (i, patch, q, ms)
-            }
-            None => {
-                let (pulled, rep) = blend::pull(mesh, hole, policy, checker, &patch);
-                let ms = ms + rep.ms;
-                p.blend = Some(rep);
-                match pulled {
-                    Some((pulled, q)) => (i, pulled, q, ms),
-                    None => (i, patch, q, ms),
-                }
-            }
-        });
+        let (patch, q, rep) =
+            blend::blended(mesh, hole, policy, checker, p.order[i], &p.tried, patch, q);
+        let ms = ms + rep.as_ref().map_or(0.0, |r| r.ms);
+        p.blend = rep;
+        p.accepted = Some((i, patch, q, ms));
     }
     p.ms = ms_since(t0);
     p

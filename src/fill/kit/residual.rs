@@ -89,7 +89,7 @@ pub fn close_keeping_unfaired(
         weight: policy.refine.weight,
         min_angle: policy.checks.min_angle_deg.max(0.0).to_radians(),
         restricted_above: policy.refine.restricted_search_above,
-        delaunay: policy.refine.search == crate::policy::Search::Delaunay,
+        delaunay: policy.refine.delaunay_first(),
         deadline: *deadline,
     };
     let tris = triangulate::triangulate(&input)?;

@@ -402,7 +402,7 @@ fn repair_by_retriangulation(
             weight: ctx.policy.refine.weight,
             min_angle: ctx.policy.checks.min_angle_deg.max(0.0).to_radians(),
             restricted_above: ctx.policy.refine.restricted_search_above,
-            delaunay: ctx.policy.refine.search == crate::policy::Search::Delaunay,
+            delaunay: ctx.policy.refine.delaunay_first(),
             deadline: ctx.deadline,
         };
         let Ok(fill) = triangulate::triangulate(&input) else {
@@ -490,7 +490,7 @@ mod tests {
             weight: ctx.policy.refine.weight,
             min_angle: ctx.policy.checks.min_angle_deg.to_radians(),
             restricted_above: ctx.policy.refine.restricted_search_above,
-            delaunay: ctx.policy.refine.search == crate::policy::Search::Delaunay,
+            delaunay: ctx.policy.refine.delaunay_first(),
             deadline: ctx.deadline,
         })?;
         let scale = vec![ctx.hole.mean_edge_length; k];

@@ -286,15 +286,9 @@ pub fn fill_checked(ctx: &FillContext) -> Result<(Patch, Option<PatchQuality>), 
         return full;
     }
     let delaunay = made(Search::Delaunay);
-    let area = |p: &Patch| -> f64 {
-        p.triangle_positions(ctx.mesh, ctx.hole)
-            .iter()
-            .map(|t| measure::tri_area(t[0], t[1], t[2]))
-            .sum()
-    };
     match (full, delaunay) {
         (Ok(f), Ok(d)) => {
-            let (af, ad) = (area(&f.0), area(&d.0));
+            let (af, ad) = (f.0.area(ctx.mesh, ctx.hole), d.0.area(ctx.mesh, ctx.hole));
             tracing::debug!(
                 hole = ctx.hole.id,
                 full = af,
@@ -348,7 +342,7 @@ pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
         weight: ctx.policy.refine.weight,
         min_angle: ctx.policy.checks.min_angle_deg.max(0.0).to_radians(),
         restricted_above: ctx.policy.refine.restricted_search_above,
-        delaunay: ctx.policy.refine.search == Search::Delaunay,
+        delaunay: ctx.policy.refine.delaunay_first(),
         deadline: ctx.deadline,
     };
     let t0 = std::time::Instant::now();

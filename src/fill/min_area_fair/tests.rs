@@ -504,12 +504,7 @@ fn both_searches_keep_the_larger_patch() {
         let ctx = FillContext::new(&mesh, &hole, &p);
         super::fill_checked(&ctx).unwrap()
     };
-    let area = |p: &Patch| -> f64 {
-        p.triangle_positions(&mesh, &hole)
-            .iter()
-            .map(|t| measure::tri_area(t[0], t[1], t[2]))
-            .sum()
-    };
+    let area = |p: &Patch| p.area(&mesh, &hole);
     let (full, delaunay, both) = (
         made(Search::Full),
         made(Search::Delaunay),
