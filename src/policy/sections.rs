@@ -626,93 +626,29 @@ pub trait PolicyName: Copy + 'static {
     fn policy_name(self) -> &'static str;
 }
 
-impl PolicyName for Search {
-    const VALUES: &'static [Search] = &[Search::Full, Search::Delaunay, Search::Both];
-    fn policy_name(self) -> &'static str {
-        match self {
-            Search::Full => "full",
-            Search::Delaunay => "delaunay",
-            Search::Both => "both",
+/// [`PolicyName`] for a plain enum: its variants in spelling order, each with its
+/// spelling (one list, so the values and the names cannot disagree).
+macro_rules! policy_names {
+    ($t:ident { $($v:ident => $name:literal),+ $(,)? }) => {
+        impl PolicyName for $t {
+            const VALUES: &'static [$t] = &[$($t::$v),+];
+            fn policy_name(self) -> &'static str {
+                match self {
+                    $($t::$v => $name),+
+                }
+            }
         }
-    }
+    };
 }
 
-impl PolicyName for TriangulationWeight {
-    const VALUES: &'static [TriangulationWeight] =
-        &[TriangulationWeight::Area, TriangulationWeight::DihedralArea];
-    fn policy_name(self) -> &'static str {
-        match self {
-            TriangulationWeight::Area => "area",
-            TriangulationWeight::DihedralArea => "dihedral_area",
-        }
-    }
-}
-
-impl PolicyName for WavefrontPlacement {
-    const VALUES: &'static [WavefrontPlacement] = &[
-        WavefrontPlacement::EdgePlane,
-        WavefrontPlacement::Interpolated,
-    ];
-    fn policy_name(self) -> &'static str {
-        match self {
-            WavefrontPlacement::EdgePlane => "edge_plane",
-            WavefrontPlacement::Interpolated => "interpolated",
-        }
-    }
-}
-
-impl PolicyName for Weights {
-    const VALUES: &'static [Weights] = &[Weights::Uniform, Weights::Cotangent, Weights::Fujiwara];
-    fn policy_name(self) -> &'static str {
-        match self {
-            Weights::Uniform => "uniform",
-            Weights::Cotangent => "cotangent",
-            Weights::Fujiwara => "fujiwara",
-        }
-    }
-}
-
-impl PolicyName for SmoothScope {
-    const VALUES: &'static [SmoothScope] = &[SmoothScope::Whole, SmoothScope::Rings];
-    fn policy_name(self) -> &'static str {
-        match self {
-            SmoothScope::Whole => "whole",
-            SmoothScope::Rings => "rings",
-        }
-    }
-}
-
-impl PolicyName for SelectMode {
-    const VALUES: &'static [SelectMode] =
-        &[SelectMode::First, SelectMode::Validate, SelectMode::Rim];
-    fn policy_name(self) -> &'static str {
-        match self {
-            SelectMode::First => "first",
-            SelectMode::Validate => "validate",
-            SelectMode::Rim => "rim",
-        }
-    }
-}
-
-impl PolicyName for IslandMode {
-    const VALUES: &'static [IslandMode] = &[IslandMode::Bridge, IslandMode::Remove];
-    fn policy_name(self) -> &'static str {
-        match self {
-            IslandMode::Bridge => "bridge",
-            IslandMode::Remove => "remove",
-        }
-    }
-}
-
-impl PolicyName for BoundaryRule {
-    const VALUES: &'static [BoundaryRule] = &[BoundaryRule::Fixed, BoundaryRule::BoundaryNeighbors];
-    fn policy_name(self) -> &'static str {
-        match self {
-            BoundaryRule::Fixed => "fixed",
-            BoundaryRule::BoundaryNeighbors => "boundary_neighbors",
-        }
-    }
-}
+policy_names!(Search { Full => "full", Delaunay => "delaunay", Both => "both" });
+policy_names!(TriangulationWeight { Area => "area", DihedralArea => "dihedral_area" });
+policy_names!(WavefrontPlacement { EdgePlane => "edge_plane", Interpolated => "interpolated" });
+policy_names!(Weights { Uniform => "uniform", Cotangent => "cotangent", Fujiwara => "fujiwara" });
+policy_names!(SmoothScope { Whole => "whole", Rings => "rings" });
+policy_names!(SelectMode { First => "first", Validate => "validate", Rim => "rim" });
+policy_names!(IslandMode { Bridge => "bridge", Remove => "remove" });
+policy_names!(BoundaryRule { Fixed => "fixed", BoundaryNeighbors => "boundary_neighbors" });
 
 impl PolicyName for Method {
     const VALUES: &'static [Method] = Method::ALL;
