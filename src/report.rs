@@ -4,7 +4,7 @@
 use crate::io::attrs::AttributesReport;
 use crate::io::Format;
 use crate::mesh::BuildReport;
-use crate::policy::{Method, Policy};
+use crate::policy::{BlendKeep, Method, Policy};
 use serde::Serialize;
 
 /// Size class of a hole.
@@ -164,7 +164,11 @@ pub struct BlendReport {
     pub weight: f64,
     /// Whether the pulled patch passed the checks and replaced the accepted one.
     pub applied: bool,
-    /// Why it was not applied (empty when it was).
+    /// Whose triangles the applied patch has (`blend.keep`, or `accepted` where
+    /// `with`'s pulled patch failed the checks); `None` when not applied.
+    pub kept: Option<BlendKeep>,
+    /// Why it was not applied, or why `blend.with`'s triangles were not kept where
+    /// the accepted patch's were (empty otherwise).
     pub reason: String,
     /// New vertices moved.
     pub moved_vertices: usize,

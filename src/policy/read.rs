@@ -34,7 +34,7 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
             "flat_method",
         ],
     ),
-    ("blend", &["weight_middle", "weight_large", "with"]),
+    ("blend", &["weight_middle", "weight_large", "with", "keep"]),
     (
         "border",
         &[
@@ -371,6 +371,7 @@ impl Reader<'_> {
             ("blend", "weight_middle") => p.blend.weight_middle = self.float(key, v)?,
             ("blend", "weight_large") => p.blend.weight_large = self.float(key, v)?,
             ("blend", "with") => p.blend.with = self.name_of::<Method>(key, v, "method")?,
+            ("blend", "keep") => p.blend.keep = self.named(key, v)?,
             ("rim", "trim") => p.rim.trim = self.boolean(key, v)?,
             ("rim", "max_rings") => p.rim.max_rings = self.usize(key, v)?,
             ("rim", "max_faces") => p.rim.max_faces = self.usize(key, v)?,

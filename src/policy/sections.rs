@@ -105,6 +105,21 @@ pub struct Blend {
     /// The second method, run on the same hole (not `fan` or `close`). A patch made by
     /// this method itself is kept as it is.
     pub with: Method,
+    /// Whose triangles the blended patch has: the surface is the same (`weight` of the
+    /// way from the accepted patch to `with`'s), the triangles are either's.
+    pub keep: BlendKeep,
+}
+
+/// Whose triangles a blended patch keeps (`blend.keep`).
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum BlendKeep {
+    /// `blend.with`'s patch, its new vertices moved `1 - weight` of the way to the
+    /// accepted patch (the wavefront's rows are better shaped than a refined thin
+    /// plate's triangles); the accepted patch pulled as below when that fails.
+    With,
+    /// The accepted patch, its new vertices moved `weight` of the way to `with`'s.
+    Accepted,
 }
 
 impl Default for Blend {
@@ -113,6 +128,7 @@ impl Default for Blend {
             weight_middle: 0.0,
             weight_large: 0.0,
             with: Method::Wavefront,
+            keep: BlendKeep::With,
         }
     }
 }
@@ -642,6 +658,7 @@ macro_rules! policy_names {
 }
 
 policy_names!(Search { Full => "full", Delaunay => "delaunay", Both => "both" });
+policy_names!(BlendKeep { With => "with", Accepted => "accepted" });
 policy_names!(TriangulationWeight { Area => "area", DihedralArea => "dihedral_area" });
 policy_names!(WavefrontPlacement { EdgePlane => "edge_plane", Interpolated => "interpolated" });
 policy_names!(Weights { Uniform => "uniform", Cotangent => "cotangent", Fujiwara => "fujiwara" });

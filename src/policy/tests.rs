@@ -67,6 +67,21 @@ fn empty_and_partial_files_use_defaults() {
 }
 
 #[test]
+fn blend_keep_reads_both_values_and_names_them_when_wrong() {
+    assert_eq!(Policy::default().blend.keep, BlendKeep::With);
+    let p = parse("[blend]\nweight_large = 0.5\nkeep = \"accepted\"\n").unwrap();
+    assert_eq!(p.blend.keep, BlendKeep::Accepted);
+    assert_eq!(p.blend.weight_large, 0.5);
+    let e = err("[blend]\nkeep = \"both\"\n").to_string();
+    assert!(
+        e.contains("policy.toml:2")
+            && e.contains("blend.keep")
+            && e.contains("\"with\", \"accepted\""),
+        "{e}"
+    );
+}
+
+#[test]
 fn dotted_keys_and_inline_tables_are_read() {
     let p = parse("dispatch.small_max = 8\nsmooth = { enabled = true, iterations = 4 }\n").unwrap();
     assert_eq!(p.dispatch.small_max, 8);
@@ -650,7 +665,7 @@ prop_compose! {
         lm in (0.01f64..0.9).prop_flat_map(|l| (Just(l), -0.999f64..(-l - 0.001))),
         smooth_weights in arb_name::<Weights>(), scope in arb_name::<SmoothScope>(),
         rings in 1usize..50, boundary in arb_name::<BoundaryRule>(),
-        hpde in arb_hpde(),
+        hpde in arb_hpde(), keep in arb_name::<BlendKeep>(),
     ) -> Settings {
         Settings {
             seed,
@@ -667,6 +682,7 @@ prop_compose! {
             hpde,
             checks: Checks { self_intersection, min_angle_deg },
             limits: Limits { hole_time_ms, ..Limits::default() },
+            blend: Blend { keep, ..Blend::default() },
             smooth: Smooth {
                 enabled, iterations, lambda: lm.0, mu: lm.1, weights: smooth_weights, scope, rings, boundary,
             },

@@ -1,17 +1,20 @@
-//! The accepted patch pulled toward a second method's surface (`[blend]`; not from the
+//! The accepted patch blended with a second method's surface (`[blend]`; not from the
 //! four papers, issue 19).
 //!
 //! Where the lost surface bends, the thin plate (`min_area_fair`) tends to flatten it
 //! and the wavefront's rows to carry the rim's slope on too far, so their errors are
 //! often of opposite sign and their mean is closer than either. The hole is filled
-//! again by `blend.with` (its own fill, without relaxation, checks or variants: only
-//! its surface is read), each new vertex of the accepted patch moves its class's
-//! weight (`blend.weight_middle`, `blend.weight_large`) of the way to the closest point
-//! of that patch, and the moved patch is relaxed tangentially and must pass the same
-//! checks as any patch, or the accepted one is kept. The second fill has its own
-//! `limits.hole_time_ms`, as every attempt has, and is not made where `blend.with` was
-//! tried on the hole before the accepted method and failed. The connectivity, the loop
-//! and the input are untouched.
+//! again by `blend.with` (its own fill, without relaxation, checks or variants), and
+//! each new vertex of the accepted patch moves its class's weight
+//! (`blend.weight_middle`, `blend.weight_large`) of the way to the closest point of
+//! that patch: the blended surface. With `blend.keep = "with"` the second patch's own
+//! triangles are put onto that surface (projected, relaxed and projected again: the
+//! wavefront's rows are better shaped than a refined thin plate's triangles); where
+//! they fail the checks, or with `keep = "accepted"`, the accepted patch's moved
+//! vertices are relaxed tangentially. Either must pass the same checks as any patch,
+//! or the accepted one is kept. The second fill has its own `limits.hole_time_ms`, as
+//! every attempt has, and is not made where `blend.with` was tried on the hole before
+//! the accepted method and failed. The loop and the input are untouched.
 //! Measured in docs/measurements.md.
 
 use super::{guarded, run_method_unchecked};
@@ -20,7 +23,7 @@ use crate::fill::kit::{relax, Deadline, FillContext};
 use crate::geometry::bvh::{closest_on_triangles, tri_box, Bvh};
 use crate::mesh::Mesh;
 use crate::patch::{Hole, Patch};
-use crate::policy::{Method, Policy};
+use crate::policy::{BlendKeep, Method, Policy, PolicyName};
 use crate::report::{Attempt, BlendReport, HoleClass, PatchQuality};
 use std::time::Instant;
 
@@ -65,6 +68,7 @@ pub fn not_tried(policy: &Policy, hole: &Hole, reason: String) -> BlendReport {
         with: policy.blend.with,
         weight: weight(policy, hole.class),
         applied: false,
+        kept: None,
         reason,
         moved_vertices: 0,
         mean_shift: 0.0,
@@ -99,8 +103,13 @@ pub fn blended(
     }
 }
 
-/// `patch` (accepted, by another method) pulled toward `blend.with`'s patch of the same
-/// hole, with its quality when it passes the checks; and what was done.
+/// `patch` (accepted, by another method) blended with `blend.with`'s patch of the same
+/// hole, with its quality when it passes the checks; and what was done. The blended
+/// surface is the accepted patch with its new vertices moved the class's weight of
+/// the way to the second patch; with `blend.keep = "with"` the second patch's
+/// triangles are put onto it ([`onto_surface`]) and tried first, then (or with
+/// `keep = "accepted"` only) the moved accepted patch. Each is relaxed tangentially
+/// and checked.
 pub fn pull(
     mesh: &Mesh,
     hole: &Hole,
@@ -110,6 +119,7 @@ pub fn pull(
 ) -> (Option<(Patch, PatchQuality)>, BlendReport) {
     let t0 = Instant::now();
     let with = policy.blend.with;
+    let w = weight(policy, hole.class);
     let mut rep = not_tried(policy, hole, String::new());
     let ctx = FillContext {
         mesh,
@@ -119,44 +129,107 @@ pub fn pull(
         checker: None,
         rim_bound: false,
     };
-    let result = match guarded(with, || run_method_unchecked(with, &ctx)) {
-        Ok(guide) => moved(mesh, hole, weight(policy, hole.class), patch, &guide)
-            .ok_or_else(|| format!("{} made no triangle to pull toward", with.name())),
-        Err(why) => Err(format!("{} failed: {why}", with.name())),
-    };
-    let out = match result {
-        Ok((p, shift)) => {
-            rep.moved_vertices = p.new_vertices.len();
-            rep.mean_shift = shift / hole.mean_edge_length.max(f64::MIN_POSITIVE);
-            let check = |p: &Patch| checker.check_patch(mesh, &hole.vertices, p, &policy.checks);
-            // the moves are uneven, so the triangles are evened out again as after
-            // any method; the unrelaxed patch is the fallback
-            let relaxed = relax::relax_checked(
-                mesh,
-                hole,
-                &p,
-                policy.fair.tangential_relax,
-                relax::RELAX_STEP,
-                check,
-            );
-            match relaxed.map_or_else(|| check(&p).map(|q| (p, q)), Ok) {
-                Ok((p, q)) => {
-                    rep.applied = true;
-                    Some((p, q))
-                }
-                Err(why) => {
-                    rep.reason = format!("the pulled patch failed the checks: {why}");
-                    None
-                }
-            }
+    let guide = match guarded(with, || run_method_unchecked(with, &ctx)) {
+        Ok(g) if g.triangles.is_empty() => {
+            rep.reason = format!("{} made no triangle to pull toward", with.name());
+            rep.ms = t0.elapsed().as_secs_f64() * 1000.0;
+            return (None, rep);
         }
+        Ok(g) => g,
         Err(why) => {
-            rep.reason = why;
-            None
+            rep.reason = format!("{} failed: {why}", with.name());
+            rep.ms = t0.elapsed().as_secs_f64() * 1000.0;
+            return (None, rep);
         }
     };
+    let check = |p: &Patch| checker.check_patch(mesh, &hole.vertices, p, &policy.checks);
+    // the moves are uneven, so the triangles are evened out again as after any
+    // method; the unrelaxed patch is the fallback
+    let settled = |p: Patch| {
+        relax::relax_checked(
+            mesh,
+            hole,
+            &p,
+            policy.fair.tangential_relax,
+            relax::RELAX_STEP,
+            check,
+        )
+        .map_or_else(|| check(&p).map(|q| (p, q)), Ok)
+    };
+    // the blended surface: the accepted patch moved the weight of the way to the
+    // guide's; with keep = "with", the guide's vertices put onto it
+    let Some((pulled, shift)) = moved(mesh, hole, w, patch, &guide) else {
+        rep.reason = format!("{} made no triangle to pull toward", with.name());
+        rep.ms = t0.elapsed().as_secs_f64() * 1000.0;
+        return (None, rep);
+    };
+    let mut order = Vec::new();
+    if policy.blend.keep == BlendKeep::With && !guide.new_vertices.is_empty() {
+        if let Some(onto) = onto_surface(mesh, hole, &guide, &pulled, policy.fair.tangential_relax)
+        {
+            order.push((BlendKeep::With, onto));
+        }
+    }
+    order.push((BlendKeep::Accepted, (pulled, shift)));
+    let mut out = None;
+    let mut failures = Vec::new();
+    for (keep, (p, shift)) in order {
+        match settled(p) {
+            Ok((p, q)) => {
+                rep.applied = true;
+                rep.kept = Some(keep);
+                rep.moved_vertices = p.new_vertices.len();
+                rep.mean_shift = shift / hole.mean_edge_length.max(f64::MIN_POSITIVE);
+                out = Some((p, q));
+                break;
+            }
+            Err(why) => failures.push(format!(
+                "the pulled patch ({} triangles kept) failed the checks: {why}",
+                keep.policy_name()
+            )),
+        }
+    }
+    // not applied: why; applied with the accepted triangles after "with"'s failed: why
+    rep.reason = failures.join("; ");
     rep.ms = t0.elapsed().as_secs_f64() * 1000.0;
     (out, rep)
+}
+
+/// Rounds of [`onto_surface`]: relax, put back onto the surface.
+const ONTO_ROUNDS: usize = 3;
+
+/// `guide`'s triangles on `surface`: its new vertices put onto the closest points of
+/// `surface`, then, [`ONTO_ROUNDS`] times, relaxed tangentially (a share of
+/// `iterations`) and put back (the first closest points bunch where the two surfaces
+/// part; the relaxation spreads them and the last projection leaves them on the
+/// surface). With the mean distance the vertices moved from the guide.
+fn onto_surface(
+    mesh: &Mesh,
+    hole: &Hole,
+    guide: &Patch,
+    surface: &Patch,
+    iterations: usize,
+) -> Option<(Patch, f64)> {
+    let (mut p, _) = moved(mesh, hole, 1.0, guide, surface)?;
+    for _ in 0..ONTO_ROUNDS {
+        relax::tangential_relax(
+            mesh,
+            hole,
+            &mut p,
+            iterations.div_ceil(ONTO_ROUNDS),
+            relax::RELAX_STEP,
+        );
+        p = moved(mesh, hole, 1.0, &p, surface)?.0;
+    }
+    let n = p.new_vertices.len().max(1) as f64;
+    let shift = p
+        .new_vertices
+        .iter()
+        .zip(&guide.new_vertices)
+        .map(|(a, b)| (*a - *b).length())
+        .sum::<f64>()
+        / n;
+    Some((p, shift))
 }
 
 /// `patch` with each new vertex moved `weight` of the way to the closest point of
@@ -238,6 +311,7 @@ mod tests {
             .edit(|s| {
                 s.blend.weight_middle = 0.5;
                 s.blend.weight_large = 0.5;
+                s.blend.keep = BlendKeep::Accepted;
             })
             .expect("valid");
         let checker = Checker::new(&mesh);
@@ -245,6 +319,7 @@ mod tests {
         let (out, rep) = pull(&mesh, &hole, &policy, &checker, &tent(0.4));
         let (p, _) = out.expect("applied");
         assert!(rep.applied, "{rep:?}");
+        assert_eq!(rep.kept, Some(BlendKeep::Accepted));
         assert_eq!(rep.with, Method::Wavefront);
         assert_eq!(rep.moved_vertices, 1);
         assert!(
@@ -252,6 +327,44 @@ mod tests {
             "{:?}",
             p.new_vertices
         );
+        crate::patch::apply_patch(&mut mesh, &hole, &p).expect("applies");
+        mesh.validate().expect("valid mesh");
+    }
+
+    #[test]
+    fn keeping_the_second_methods_triangles_lifts_them_halfway_to_the_accepted_surface() {
+        let (mut mesh, hole) = sheet_hole(HoleClass::Middle);
+        let policy = Policy::default()
+            .edit(|s| {
+                s.blend.weight_middle = 0.5;
+                s.blend.keep = BlendKeep::With;
+            })
+            .expect("valid");
+        let checker = Checker::new(&mesh);
+        let ctx = FillContext {
+            mesh: &mesh,
+            hole: &hole,
+            policy: &policy,
+            deadline: Deadline::none(),
+            checker: None,
+            rim_bound: false,
+        };
+        let own = run_method_unchecked(Method::Wavefront, &ctx).expect("the wavefront fills");
+        assert!(!own.new_vertices.is_empty(), "the wavefront adds vertices");
+        let (out, rep) = pull(&mesh, &hole, &policy, &checker, &tent(0.4));
+        let (p, _) = out.expect("applied");
+        assert!(rep.applied, "{rep:?}");
+        assert_eq!(rep.kept, Some(BlendKeep::With));
+        assert_eq!(rep.moved_vertices, own.new_vertices.len());
+        assert_eq!(p.triangles, own.triangles, "the wavefront's triangles");
+        // the blended surface is the tent with its apex halfway down: each vertex at
+        // half the tent's height where it stands (the last tangential relaxation
+        // slides it a little over the creases of that surface)
+        let height = |v: DVec3| 0.4 * (1.0 - (v.x - 3.0).abs().max((v.y - 3.0).abs()));
+        for v in &p.new_vertices {
+            let h = height(*v);
+            assert!((v.z - 0.5 * h).abs() < 0.05 * h, "{v}: tent at {h}");
+        }
         crate::patch::apply_patch(&mut mesh, &hole, &p).expect("applies");
         mesh.validate().expect("valid mesh");
     }
