@@ -23,8 +23,9 @@ use crate::fill::kit::{relax, Deadline, FillContext};
 use crate::geometry::bvh::{closest_on_triangles, tri_box, Bvh};
 use crate::mesh::Mesh;
 use crate::patch::{Hole, Patch};
-use crate::policy::{BlendKeep, Method, Policy, PolicyName};
+use crate::policy::{BlendKeep, Method, Policy};
 use crate::report::{Attempt, BlendReport, HoleClass, PatchQuality};
+use glam::DVec3;
 use std::time::Instant;
 
 /// The blend weight of a hole of `class` (`blend.weight_middle`, `blend.weight_large`;
@@ -183,10 +184,18 @@ pub fn pull(
                 out = Some((p, q));
                 break;
             }
-            Err(why) => failures.push(format!(
-                "the pulled patch ({} triangles kept) failed the checks: {why}",
-                keep.policy_name()
-            )),
+            Err(why) => failures.push(match keep {
+                BlendKeep::With => format!(
+                    "the blended surface on {}'s triangles failed the checks: {why}",
+                    with.name()
+                ),
+                BlendKeep::Accepted => {
+                    format!(
+                        "the accepted patch pulled toward {}'s failed the checks: {why}",
+                        with.name()
+                    )
+                }
+            }),
         }
     }
     // not applied: why; applied with the accepted triangles after "with"'s failed: why
@@ -210,7 +219,8 @@ fn onto_surface(
     surface: &Patch,
     iterations: usize,
 ) -> Option<(Patch, f64)> {
-    let (mut p, _) = moved(mesh, hole, 1.0, guide, surface)?;
+    let onto = Surface::of(mesh, hole, surface)?;
+    let (mut p, _) = onto.pull(hole, 1.0, guide);
     for _ in 0..ONTO_ROUNDS {
         relax::tangential_relax(
             mesh,
@@ -219,7 +229,7 @@ fn onto_surface(
             iterations.div_ceil(ONTO_ROUNDS),
             relax::RELAX_STEP,
         );
-        p = moved(mesh, hole, 1.0, &p, surface)?.0;
+        p = onto.pull(hole, 1.0, &p).0;
     }
     let n = p.new_vertices.len().max(1) as f64;
     let shift = p
@@ -241,23 +251,42 @@ pub fn moved(
     patch: &Patch,
     guide: &Patch,
 ) -> Option<(Patch, f64)> {
-    let tris = guide.triangle_positions(mesh, hole);
-    if tris.is_empty() {
-        return None;
-    }
-    let bvh = Bvh::build(tris.len(), |i| tri_box(&tris[i]));
-    let r = hole.mean_edge_length;
-    let mut out = patch.clone();
-    let mut total = 0.0;
-    for p in &mut out.new_vertices {
-        if let Some(q) = closest_on_triangles(&bvh, &tris, *p, r) {
-            let d = weight * (q - *p);
-            total += d.length();
-            *p += d;
+    Some(Surface::of(mesh, hole, guide)?.pull(hole, weight, patch))
+}
+
+/// A patch's triangles, indexed for closest points.
+struct Surface {
+    tris: Vec<[DVec3; 3]>,
+    bvh: Bvh,
+}
+
+impl Surface {
+    /// `None` when the patch has no triangle (or none whose corners it has).
+    fn of(mesh: &Mesh, hole: &Hole, patch: &Patch) -> Option<Surface> {
+        let tris = patch.triangle_positions(mesh, hole);
+        if tris.is_empty() {
+            return None;
         }
+        let bvh = Bvh::build(tris.len(), |i| tri_box(&tris[i]));
+        Some(Surface { tris, bvh })
     }
-    let n = out.new_vertices.len().max(1) as f64;
-    Some((out, total / n))
+
+    /// `patch` with each new vertex moved `weight` of the way to its closest point
+    /// here, and the mean distance moved.
+    fn pull(&self, hole: &Hole, weight: f64, patch: &Patch) -> (Patch, f64) {
+        let r = hole.mean_edge_length;
+        let mut out = patch.clone();
+        let mut total = 0.0;
+        for p in &mut out.new_vertices {
+            if let Some(q) = closest_on_triangles(&self.bvh, &self.tris, *p, r) {
+                let d = weight * (q - *p);
+                total += d.length();
+                *p += d;
+            }
+        }
+        let n = out.new_vertices.len().max(1) as f64;
+        (out, total / n)
+    }
 }
 
 #[cfg(test)]
