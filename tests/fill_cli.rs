@@ -132,6 +132,16 @@ fn sphere_case(policy: Option<&str>, max_bound: f64, mean_bound: f64) {
                 assert_eq!(b["weight"], 0.5, "{h}");
                 assert_eq!(b["applied"], true, "{h}");
                 assert_eq!(b["moved_vertices"], h["added_vertices"], "{h}");
+                // the wavefront's triangles on the blended surface, unless they failed
+                // the checks (then the reason says so)
+                match b["kept"].as_str() {
+                    Some("with") => assert_eq!(b["reason"], "", "{h}"),
+                    Some("accepted") => assert!(
+                        b["reason"].as_str().unwrap().contains("wavefront's triangles"),
+                        "{h}"
+                    ),
+                    _ => panic!("blend.kept: {h}"),
+                }
                 let shift = b["mean_shift"].as_f64().unwrap();
                 assert!(shift > 0.0 && shift < 1.0, "{h}");
             }
