@@ -137,7 +137,10 @@ fn sphere_case(policy: Option<&str>, max_bound: f64, mean_bound: f64) {
                 match b["kept"].as_str() {
                     Some("with") => assert_eq!(b["reason"], "", "{h}"),
                     Some("accepted") => assert!(
-                        b["reason"].as_str().unwrap().contains("wavefront's triangles"),
+                        b["reason"]
+                            .as_str()
+                            .unwrap()
+                            .contains("wavefront's triangles"),
                         "{h}"
                     ),
                     _ => panic!("blend.kept: {h}"),

@@ -51,7 +51,13 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
     ("debris", &["remove_below_faces"]),
     (
         "refine",
-        &["density", "weight", "restricted_search_above", "search"],
+        &[
+            "density",
+            "weight",
+            "restricted_search_above",
+            "search",
+            "collapse",
+        ],
     ),
     (
         "fair",
@@ -388,6 +394,7 @@ impl Reader<'_> {
                 p.refine.restricted_search_above = self.usize(key, v)?
             }
             ("refine", "search") => p.refine.search = self.named(key, v)?,
+            ("refine", "collapse") => p.refine.collapse = self.float(key, v)?,
             ("fair", "continuity") => {
                 let n = self.uint(key, v)?;
                 p.fair.continuity = u8::try_from(n)

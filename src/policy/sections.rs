@@ -290,6 +290,9 @@ pub struct Refine {
     /// The search space of the exhaustive triangulation (loops up to
     /// `restricted_search_above` vertices).
     pub search: Search,
+    /// `min_area_fair`'s relaxation collapses patch edges shorter than this times the
+    /// local scale (0: none).
+    pub collapse: f64,
 }
 
 /// Where the initial triangulation of a loop up to `refine.restricted_search_above`
@@ -322,6 +325,7 @@ impl Default for Refine {
             weight: TriangulationWeight::DihedralArea,
             restricted_search_above: 400,
             search: Search::Full,
+            collapse: 0.75,
         }
     }
 }

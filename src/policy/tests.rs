@@ -82,6 +82,20 @@ fn blend_keep_reads_both_values_and_names_them_when_wrong() {
 }
 
 #[test]
+fn refine_collapse_is_a_share_below_one() {
+    assert_eq!(Policy::default().refine.collapse, 0.75);
+    assert_eq!(
+        parse("[refine]\ncollapse = 0\n").unwrap().refine.collapse,
+        0.0
+    );
+    let e = err("[refine]\ncollapse = 1.5\n").to_string();
+    assert!(
+        e.contains("policy.toml:2") && e.contains("refine.collapse"),
+        "{e}"
+    );
+}
+
+#[test]
 fn dotted_keys_and_inline_tables_are_read() {
     let p = parse("dispatch.small_max = 8\nsmooth = { enabled = true, iterations = 4 }\n").unwrap();
     assert_eq!(p.dispatch.small_max, 8);
@@ -654,7 +668,7 @@ prop_compose! {
         split_long_edges in prop_oneof![Just(0.0f64), 1.0f64..100.0],
         density in prop_oneof![Just(0.0f64), 1.0f64..=4.0],
         weight in arb_name::<TriangulationWeight>(), restricted_search_above in 3usize..=2000,
-        search in arb_name::<Search>(),
+        search in arb_name::<Search>(), collapse in prop_oneof![Just(0.0f64), 0.01f64..0.99],
         continuity in 0u8..=3, fair_weights in arb_name::<Weights>(),
         angles in (0.001f64..179.0).prop_flat_map(|a| (Just(a), (a + 0.5)..179.99)),
         alpha in 0.0f64..=1.0, omega1 in 0.0f64..=1.0, merge_distance in 0.0f64..=1.0,
@@ -672,7 +686,7 @@ prop_compose! {
             dispatch: Dispatch { small_max, middle_max: small_max + extra, small, middle, large },
             border: Border { max_vertices, max_bbox_share, min_area_share: 0.25, only_longest },
             clean: Clean { remove_teeth, split_long_edges },
-            refine: Refine { density, weight, restricted_search_above, search },
+            refine: Refine { density, weight, restricted_search_above, search, collapse },
             fair: Fair { continuity, weights: fair_weights, tangential_relax: 100, passes: 2 },
             front: Front {
                 angle_small: angles.0, angle_large: angles.1, alpha, omega1, merge_distance,

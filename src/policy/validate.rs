@@ -186,6 +186,13 @@ impl Settings {
             3,
             MAX_FULL_SEARCH,
         )?;
+        finite("refine.collapse", r.collapse)?;
+        if !(0.0..1.0).contains(&r.collapse) {
+            return Err(Invalid::new(
+                "refine.collapse",
+                format!("must be 0 (off) or in (0, 1) (got {})", r.collapse),
+            ));
+        }
 
         if self.fair.continuity > 3 {
             return Err(Invalid::new(

@@ -241,12 +241,6 @@ fn fill_graded(
 const RELAX_FLAT: usize = 8;
 /// Relaxation rounds on the faired patch before each further fairing.
 const RELAX_FAIRED: usize = 3;
-/// The relaxation collapses patch edges shorter than this times the local scale
-/// (measured, seeds 1-5, nine meshes, `config/fidelity.toml`: q > 1.39 on 60 % of the
-/// patch triangles without collapses, 72 % at 0.75, mean APE 5.69 and 5.71 per mille;
-/// on six meshes of seed 1, 0.6 gave fewer good triangles, 0.9 as many with smaller
-/// smallest angles).
-const COLLAPSE_RATIO: f64 = 0.75;
 
 /// Fills the hole as [`fill`] does, self-checked ([`retry`]): when the patch fails the
 /// dispatcher's checks (a fold of the minimum-area triangulation that fairing turns
@@ -351,7 +345,7 @@ pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
     let cap = ctx.policy.limits.max_patch_triangles;
     let floor = coarse_scale(&pts, &tris, &scale, ctx.policy.refine.density, cap);
     let mut r = refine::Refiner::new(pts, scale, tris, &forbidden);
-    r.collapse_ratio = COLLAPSE_RATIO;
+    r.collapse_ratio = ctx.policy.refine.collapse;
     if let Some(f) = floor {
         r.scale_floor = f;
         tracing::debug!(

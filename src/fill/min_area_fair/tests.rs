@@ -523,3 +523,26 @@ fn both_searches_keep_the_larger_patch() {
     apply_patch(&mut m, &hole, &delaunay.0).unwrap();
     m.validate().unwrap();
 }
+
+#[test]
+fn refine_collapse_zero_keeps_the_short_edges_of_the_splits() {
+    // the sphere hole of about 100 vertices: collapsing (the default 0.75) leaves fewer
+    // new vertices and a larger share of well-shaped triangles than none, both on the
+    // sphere
+    let (mesh, hole, policy) = sphere_case(5, 37.0);
+    let none = policy.edit(|s| s.refine.collapse = 0.0).unwrap();
+    let (mut m1, mut m2) = (mesh.clone(), mesh);
+    let with = fill_checked(&mut m1, &hole, &policy);
+    let without = fill_checked(&mut m2, &hole, &none);
+    assert!(
+        with.new_vertices.len() < without.new_vertices.len(),
+        "{} collapsed against {} not",
+        with.new_vertices.len(),
+        without.new_vertices.len()
+    );
+    assert!(q_share(&m1, &hole, &with) > q_share(&m2, &hole, &without));
+    for p in [&with, &without] {
+        let (mean, _) = sphere_error(p, 10.0);
+        assert!(mean < 0.01, "mean radial error {mean}");
+    }
+}
