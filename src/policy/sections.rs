@@ -114,9 +114,10 @@ pub struct Blend {
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
 pub enum BlendKeep {
-    /// `blend.with`'s patch, its new vertices moved `1 - weight` of the way to the
-    /// accepted patch (the wavefront's rows are better shaped than a refined thin
-    /// plate's triangles); the accepted patch pulled as below when that fails.
+    /// `blend.with`'s patch, its new vertices put onto the blended surface (the
+    /// accepted patch moved `weight` of the way to `with`'s): the wavefront's rows are
+    /// better shaped than a refined thin plate's triangles. The accepted patch pulled
+    /// as below when that fails the checks.
     With,
     /// The accepted patch, its new vertices moved `weight` of the way to `with`'s.
     Accepted,
