@@ -123,22 +123,22 @@ pub fn pull(
     let w = weight(policy, hole.class);
     let mut rep = not_tried(policy, hole, String::new());
     let ctx = FillContext {
-        mesh,
-        hole,
-        policy,
         deadline: Deadline::after_ms(policy.limits.hole_time_ms),
-        checker: None,
-        rim_bound: false,
+        ..FillContext::new(mesh, hole, policy)
     };
-    let guide = match guarded(with, || run_method_unchecked(with, &ctx)) {
-        Ok(g) if g.triangles.is_empty() => {
-            rep.reason = format!("{} made no triangle to pull toward", with.name());
-            rep.ms = t0.elapsed().as_secs_f64() * 1000.0;
-            return (None, rep);
-        }
-        Ok(g) => g,
+    // the blended surface: the accepted patch moved the weight of the way to the
+    // guide's (with keep = "with", the guide's vertices are put onto it below)
+    let made = guarded(with, || run_method_unchecked(with, &ctx))
+        .map_err(|why| format!("{} failed: {why}", with.name()))
+        .and_then(|guide| {
+            let pulled = moved(mesh, hole, w, patch, &guide)
+                .ok_or_else(|| format!("{} made no triangle to pull toward", with.name()))?;
+            Ok((guide, pulled))
+        });
+    let (guide, (pulled, shift)) = match made {
+        Ok(m) => m,
         Err(why) => {
-            rep.reason = format!("{} failed: {why}", with.name());
+            rep.reason = why;
             rep.ms = t0.elapsed().as_secs_f64() * 1000.0;
             return (None, rep);
         }
@@ -156,13 +156,6 @@ pub fn pull(
             check,
         )
         .map_or_else(|| check(&p).map(|q| (p, q)), Ok)
-    };
-    // the blended surface: the accepted patch moved the weight of the way to the
-    // guide's; with keep = "with", the guide's vertices put onto it
-    let Some((pulled, shift)) = moved(mesh, hole, w, patch, &guide) else {
-        rep.reason = format!("{} made no triangle to pull toward", with.name());
-        rep.ms = t0.elapsed().as_secs_f64() * 1000.0;
-        return (None, rep);
     };
     let mut order = Vec::new();
     if policy.blend.keep == BlendKeep::With && !guide.new_vertices.is_empty() {
@@ -370,14 +363,7 @@ mod tests {
             })
             .expect("valid");
         let checker = Checker::new(&mesh);
-        let ctx = FillContext {
-            mesh: &mesh,
-            hole: &hole,
-            policy: &policy,
-            deadline: Deadline::none(),
-            checker: None,
-            rim_bound: false,
-        };
+        let ctx = FillContext::new(&mesh, &hole, &policy);
         let own = run_method_unchecked(Method::Wavefront, &ctx).expect("the wavefront fills");
         assert!(!own.new_vertices.is_empty(), "the wavefront adds vertices");
         let (out, rep) = pull(&mesh, &hole, &policy, &checker, &tent(0.4));
