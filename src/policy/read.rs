@@ -131,6 +131,7 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
             "kernel_width",
             "iterations",
             "merge_distance",
+            "max_area_ratio",
         ],
     ),
 ];
@@ -432,6 +433,7 @@ impl Reader<'_> {
             ("lssvm", "kernel_width") => p.lssvm.kernel_width = self.float(key, v)?,
             ("lssvm", "iterations") => p.lssvm.iterations = self.usize(key, v)?,
             ("lssvm", "merge_distance") => p.lssvm.merge_distance = self.float(key, v)?,
+            ("lssvm", "max_area_ratio") => p.lssvm.max_area_ratio = self.float(key, v)?,
             ("hpde", "population_factor") => p.hpde.population_factor = self.usize(key, v)?,
             ("hpde", "f") => p.hpde.f = self.float(key, v)?,
             ("hpde", "cr") => p.hpde.cr = self.float(key, v)?,

@@ -418,6 +418,9 @@ pub struct Lssvm {
     /// A new front vertex closer than this times the mean boundary edge length to a
     /// front vertex is merged into it.
     pub merge_distance: f64,
+    /// The initial front has run away when its patch's area passes this times the
+    /// loop's vector area (0: no limit).
+    pub max_area_ratio: f64,
 }
 
 impl Default for Lssvm {
@@ -428,6 +431,7 @@ impl Default for Lssvm {
             kernel_width: 0.7,
             iterations: 2,
             merge_distance: 0.5,
+            max_area_ratio: 3.0,
         }
     }
 }

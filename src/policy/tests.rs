@@ -466,6 +466,11 @@ const RANGE_CASES: &[(&str, &str, &str)] = &[
         "must be at least 1 (got 0)",
     ),
     (
+        "[lssvm]\nmax_area_ratio = 0.5",
+        "lssvm.max_area_ratio",
+        "must be 0 (no limit) or at least 1 (got 0.5)",
+    ),
+    (
         "[checks]\nmin_angle_deg = 30",
         "checks.min_angle_deg",
         "must be less than 30 (got 30)",

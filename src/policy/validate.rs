@@ -389,6 +389,16 @@ impl Lssvm {
                 format!("must be in [0, 1) (got {})", self.merge_distance),
             ));
         }
+        finite("lssvm.max_area_ratio", self.max_area_ratio)?;
+        if !(self.max_area_ratio == 0.0 || self.max_area_ratio >= 1.0) {
+            return Err(Invalid::new(
+                "lssvm.max_area_ratio",
+                format!(
+                    "must be 0 (no limit) or at least 1 (got {})",
+                    self.max_area_ratio
+                ),
+            ));
+        }
         Ok(())
     }
 }

@@ -10,13 +10,17 @@ pub enum FillError {
     /// The per-hole time limit ran out.
     #[error("time limit reached")]
     Timeout,
-    /// The wavefront's patch grew past `wavefront.max_area_ratio` times the loop's
-    /// vector area: the front climbed away from the hole.
+    /// A front's patch grew past `max_area_ratio` times the loop's vector area (the
+    /// policy key `key`: `wavefront.max_area_ratio`, `lssvm.max_area_ratio`): the front
+    /// climbed away from the hole.
     #[error(
         "the front ran away: the patch's area passed {max_area_ratio} times the loop's \
-         vector area (wavefront.max_area_ratio)"
+         vector area ({key})"
     )]
-    Runaway { max_area_ratio: f64 },
+    Runaway {
+        key: &'static str,
+        max_area_ratio: f64,
+    },
     /// The patch would pass (or passed) a size limit.
     #[error("{0}")]
     TooLarge(TooLarge),
@@ -183,6 +187,7 @@ mod tests {
     fn messages_are_the_logs_wording() {
         assert_eq!(
             FillError::Runaway {
+                key: "wavefront.max_area_ratio",
                 max_area_ratio: 2.0
             }
             .to_string(),

@@ -99,6 +99,7 @@ pub fn first_passing_unless(
             variant = *name,
             ok = made.is_ok(),
             ms = t.elapsed().as_secs_f64() * 1000.0,
+            error = made.as_ref().err().map(|e| e.to_string()),
             "variant run"
         );
         match made {

@@ -41,18 +41,23 @@ pub fn initial_front(
     hole: &[VertexId],
     edge: f64,
     merge_distance: f64,
+    max_area_ratio: f64,
     deadline: &Deadline,
 ) -> Result<Patch, FillError> {
-    initial_front_with(mesh, hole, edge, merge_distance, deadline, false)
+    initial_front_with(mesh, hole, edge, merge_distance, max_area_ratio, deadline, false)
 }
 
 /// [`initial_front`]; with `residual`, a stuck 3-D front closes its loop as a residual
-/// front ([`crate::fill::kit::residual`]) instead of the planar fallback.
+/// front ([`crate::fill::kit::residual`]) instead of the planar fallback. A 3-D front
+/// whose patch's area passes `max_area_ratio` times the loop's vector area (0: no
+/// limit) stops with [`FillError::Runaway`] (then, without `residual`, the planar
+/// front is tried).
 pub fn initial_front_with(
     mesh: &Mesh,
     hole: &[VertexId],
     edge: f64,
     merge_distance: f64,
+    max_area_ratio: f64,
     deadline: &Deadline,
     residual: bool,
 ) -> Result<Patch, FillError> {
@@ -65,18 +70,24 @@ pub fn initial_front_with(
     if !(edge.is_finite() && edge > 0.0) {
         return Err(FillError::bad_loop("front edge length is not positive"));
     }
-    if residual {
+    let front3d = || {
         let mut f = Front::new(mesh, hole, edge, merge_distance, false);
+        if let Some(f) = f.as_mut() {
+            f.max_area_ratio = max_area_ratio;
+            if max_area_ratio > 0.0 {
+                f.max_area = max_area_ratio * measure::vector_area(&f.pos[..k]);
+            }
+        }
+        f
+    };
+    if residual {
+        let mut f = front3d();
         if let Some(f) = f.as_mut() {
             f.residual = Some(*deadline);
         }
         return run_front(f, k, deadline);
     }
-    match run_front(
-        Front::new(mesh, hole, edge, merge_distance, false),
-        k,
-        deadline,
-    ) {
+    match run_front(front3d(), k, deadline) {
         Err(why3d) if why3d != FillError::Timeout => {
             // the same front in the loop's best-fit plane, lifted by a harmonic map
             let flat = run_front(
@@ -180,6 +191,12 @@ pub(super) fn run_front(
         }
         let mut next = f.step(&lp)?;
         loops.append(&mut next);
+        if f.area > f.max_area {
+            return Err(FillError::Runaway {
+                key: "lssvm.max_area_ratio",
+                max_area_ratio: f.max_area_ratio,
+            });
+        }
     }
     let new_vertices = f.pos[k..].to_vec();
     if new_vertices.iter().any(|p| !p.is_finite()) {
@@ -222,6 +239,11 @@ pub(super) struct Front {
     pub(super) radius: f64,
     /// Close a stuck loop as a residual front (with this deadline) instead of failing.
     pub(super) residual: Option<Deadline>,
+    /// Area of the patch so far; the front stops (has run away) once it passes
+    /// `max_area` (`max_area_ratio` times the loop's vector area; infinite: no limit).
+    area: f64,
+    max_area: f64,
+    max_area_ratio: f64,
     /// The guide normal at each patch vertex (vertices do not move while the front
     /// runs; the guide sums over the whole loop, so computing it again at every step
     /// made a 200-vertex hole take seconds).
@@ -343,6 +365,9 @@ impl Front {
             edge,
             merge: merge_distance * edge,
             residual: None,
+            area: 0.0,
+            max_area: f64::INFINITY,
+            max_area_ratio: 0.0,
             guide_at,
             near_obstacles: (radius.is_finite() && radius > 0.0).then(|| Grid::new(radius, centre)),
         };
@@ -383,6 +408,7 @@ impl Front {
                 self.nacc[t[c] as usize] += n;
                 self.edges.insert(edge_key(t[c], t[(c + 1) % 3]));
             }
+            self.area += 0.5 * n.length();
             self.tris.push(*t);
             self.push_obstacle(Obstacle::new(*t, t.map(|i| self.pos[i as usize])));
         }

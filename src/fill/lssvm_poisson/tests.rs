@@ -55,6 +55,7 @@ fn run(mesh: &Mesh, lp: &[VertexId], policy: &Policy) -> Run {
         lp,
         hole.mean_edge_length,
         policy.lssvm.merge_distance,
+        policy.lssvm.max_area_ratio,
         &Deadline::none(),
     )
     .unwrap();
@@ -371,4 +372,44 @@ fn split_loops_splits_at_the_first_repeated_position() {
         assert_eq!(front::split_loops(seq.clone()), want, "{seq:?}");
     }
     assert!(split > 100, "few sequences split: {split}");
+}
+
+/// `lssvm.max_area_ratio`: a 3-D front whose patch passes that many times the loop's
+/// vector area stops as [`FillError::Runaway`]. The sphere cap of 0.52 rad has 1.07
+/// times its rim's vector area: a limit of 1 stops the front, the default (3) lets it
+/// close; with the limit of 1 the method still closes the hole (the planar front,
+/// then the other starts).
+#[test]
+fn a_front_past_max_area_ratio_stops_as_a_runaway() {
+    let (mesh, lp) = sphere_case(4, 0.52);
+    let policy = Policy::default();
+    let hole = Hole::new(0, &mesh, lp.clone(), &policy);
+    let l = hole.mean_edge_length;
+    let front = |ratio: f64| {
+        initial_front_with(&mesh, &lp, l, 0.5, ratio, &Deadline::none(), true)
+    };
+    match front(1.0) {
+        Err(FillError::Runaway {
+            key: "lssvm.max_area_ratio",
+            max_area_ratio,
+        }) => assert_eq!(max_area_ratio, 1.0),
+        other => panic!("expected a runaway, got {other:?}"),
+    }
+    let closed = front(policy.lssvm.max_area_ratio).unwrap();
+    let pos = patch_positions(&mesh, &lp, &closed);
+    let area: f64 = closed
+        .triangles
+        .iter()
+        .map(|t| measure::tri_area(pos[t[0] as usize], pos[t[1] as usize], pos[t[2] as usize]))
+        .sum();
+    let ratio = area / measure::vector_area(&pos[..lp.len()]);
+    assert!((1.0..1.2).contains(&ratio), "{ratio}");
+    assert_eq!(front(0.0).unwrap(), closed);
+    let tight = policy.edit(|s| s.lssvm.max_area_ratio = 1.0).unwrap();
+    let ctx = FillContext::new(&mesh, &hole, &tight);
+    let (patch, quality) = fill_checked(&ctx).unwrap();
+    assert!(quality.is_some());
+    let mut m2 = mesh.clone();
+    apply_patch(&mut m2, &hole, &patch).unwrap();
+    m2.validate().unwrap();
 }

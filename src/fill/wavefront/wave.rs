@@ -482,6 +482,7 @@ impl Wave {
     pub(super) fn check_area(&self, opts: &Wavefront) -> Result<(), FillError> {
         if self.area > self.max_area {
             return Err(FillError::Runaway {
+                key: "wavefront.max_area_ratio",
                 max_area_ratio: opts.max_area_ratio,
             });
         }
