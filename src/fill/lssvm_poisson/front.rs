@@ -44,7 +44,15 @@ pub fn initial_front(
     max_area_ratio: f64,
     deadline: &Deadline,
 ) -> Result<Patch, FillError> {
-    initial_front_with(mesh, hole, edge, merge_distance, max_area_ratio, deadline, false)
+    initial_front_with(
+        mesh,
+        hole,
+        edge,
+        merge_distance,
+        max_area_ratio,
+        deadline,
+        false,
+    )
 }
 
 /// [`initial_front`]; with `residual`, a stuck 3-D front closes its loop as a residual

@@ -385,9 +385,7 @@ fn a_front_past_max_area_ratio_stops_as_a_runaway() {
     let policy = Policy::default();
     let hole = Hole::new(0, &mesh, lp.clone(), &policy);
     let l = hole.mean_edge_length;
-    let front = |ratio: f64| {
-        initial_front_with(&mesh, &lp, l, 0.5, ratio, &Deadline::none(), true)
-    };
+    let front = |ratio: f64| initial_front_with(&mesh, &lp, l, 0.5, ratio, &Deadline::none(), true);
     match front(1.0) {
         Err(FillError::Runaway {
             key: "lssvm.max_area_ratio",
