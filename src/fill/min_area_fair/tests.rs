@@ -495,7 +495,9 @@ fn the_self_checked_fill_returns_a_checked_patch() {
     assert_eq!(v[2].1.fair.weights, crate::policy::Weights::Uniform);
     assert_eq!(v[2].1.refine.weight, TriangulationWeight::DihedralArea);
     // a policy with uniform weights has no third variant
-    let uniform = policy.edit(|s| s.fair.weights = crate::policy::Weights::Uniform).unwrap();
+    let uniform = policy
+        .edit(|s| s.fair.weights = crate::policy::Weights::Uniform)
+        .unwrap();
     assert_eq!(variants(&uniform).len(), 2);
 }
 
