@@ -489,16 +489,20 @@ fn the_self_checked_fill_returns_a_checked_patch() {
     let (mean, _) = sphere_error(&patch, 10.0);
     assert!(mean < 0.002, "mean radial error {mean}");
     let v = variants(&policy);
-    assert_eq!(v.len(), 3);
+    assert_eq!(v.len(), 4);
     assert_eq!(v[0].1.refine.weight, TriangulationWeight::DihedralArea);
     assert_eq!(v[1].1.refine.weight, TriangulationWeight::Area);
-    assert_eq!(v[2].1.fair.weights, crate::policy::Weights::Uniform);
+    assert_eq!(v[2].1.refine.collapse, 0.0);
     assert_eq!(v[2].1.refine.weight, TriangulationWeight::DihedralArea);
-    // a policy with uniform weights has no third variant
+    assert_eq!(v[3].1.fair.weights, crate::policy::Weights::Uniform);
+    assert_eq!(v[3].1.refine.collapse, policy.refine.collapse);
+    // a policy without collapses, or with uniform weights, has no such variant
+    let none = policy.edit(|s| s.refine.collapse = 0.0).unwrap();
+    assert_eq!(variants(&none).len(), 3);
     let uniform = policy
         .edit(|s| s.fair.weights = crate::policy::Weights::Uniform)
         .unwrap();
-    assert_eq!(variants(&uniform).len(), 2);
+    assert_eq!(variants(&uniform).len(), 3);
 }
 
 /// `refine.search = "both"` keeps whichever of the two searches' checked patches has
