@@ -255,16 +255,7 @@ impl Settings {
             ));
         }
         closed("wavefront.merge_distance", w.merge_distance, 0.0, 1.0)?;
-        finite("wavefront.max_area_ratio", w.max_area_ratio)?;
-        if !(w.max_area_ratio == 0.0 || w.max_area_ratio >= 1.0) {
-            return Err(Invalid::new(
-                "wavefront.max_area_ratio",
-                format!(
-                    "must be 0 (no limit) or at least 1 (got {})",
-                    w.max_area_ratio
-                ),
-            ));
-        }
+        area_ratio("wavefront.max_area_ratio", w.max_area_ratio)?;
         at_least("wavefront.max_steps_per_vertex", w.max_steps_per_vertex, 1)?;
         let h = &self.hpde;
         between(
@@ -389,17 +380,7 @@ impl Lssvm {
                 format!("must be in [0, 1) (got {})", self.merge_distance),
             ));
         }
-        finite("lssvm.max_area_ratio", self.max_area_ratio)?;
-        if !(self.max_area_ratio == 0.0 || self.max_area_ratio >= 1.0) {
-            return Err(Invalid::new(
-                "lssvm.max_area_ratio",
-                format!(
-                    "must be 0 (no limit) or at least 1 (got {})",
-                    self.max_area_ratio
-                ),
-            ));
-        }
-        Ok(())
+        area_ratio("lssvm.max_area_ratio", self.max_area_ratio)
     }
 }
 
@@ -414,6 +395,19 @@ fn finite(key: &'static str, x: f64) -> Result<(), Invalid> {
         Err(Invalid::new(
             key,
             format!("must be a finite number (got {x})"),
+        ))
+    }
+}
+
+/// A front's runaway limit: 0 (no limit) or at least 1 times the loop's vector area.
+fn area_ratio(key: &'static str, x: f64) -> Result<(), Invalid> {
+    finite(key, x)?;
+    if x == 0.0 || x >= 1.0 {
+        Ok(())
+    } else {
+        Err(Invalid::new(
+            key,
+            format!("must be 0 (no limit) or at least 1 (got {x})"),
         ))
     }
 }
