@@ -36,18 +36,8 @@ def max_dihedral(V, F):
     """Largest angle (degrees) between the normals of two faces of F sharing an edge."""
     if len(F) < 2:
         return 0.0
-    Nn, _ = face_normals(V, F)
-    e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
-    fid = np.tile(np.arange(len(F)), 3)
-    key = np.minimum(e[:, 0], e[:, 1]) * (int(V.shape[0]) + 1) + np.maximum(e[:, 0], e[:, 1])
-    o = np.argsort(key, kind="stable")
-    ks = key[o]
-    same = np.nonzero(ks[1:] == ks[:-1])[0]
-    if len(same) == 0:
-        return 0.0
-    f1, f2 = fid[o][same], fid[o][same + 1]
-    cos = np.clip((Nn[f1] * Nn[f2]).sum(1), -1, 1)
-    return float(np.degrees(np.arccos(cos)).max())
+    ang = perhole.dihedral_angles(V, F, face_normals(V, F)[0])
+    return float(ang.max()) if len(ang) else 0.0
 
 
 def main():

@@ -14,6 +14,17 @@ import numpy as np
 sys.path.insert(0, os.environ.get("BENCH", os.path.join(os.path.dirname(__file__), "..", "..", "shared", "bench")))
 import metrics, mio, topo
 
+def dihedral_angles(V, F, Nn):
+    """Angles (degrees) between the unit normals `Nn` of each two faces of F that
+    share an edge."""
+    e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    fid = np.tile(np.arange(len(F)), 3)
+    key = np.minimum(e[:, 0], e[:, 1]) * (len(V) + 1) + np.maximum(e[:, 0], e[:, 1])
+    o = np.argsort(key); ks = key[o]
+    same = np.nonzero(ks[1:] == ks[:-1])[0]
+    f1 = fid[o][same]; f2 = fid[o][same + 1]
+    return np.degrees(np.arccos(np.clip((Nn[f1] * Nn[f2]).sum(1), -1, 1)))
+
 def feats(Vin, Fin, A, loop):
     loop = np.asarray(loop)
     P = Vin[loop]
@@ -28,13 +39,7 @@ def feats(Vin, Fin, A, loop):
     N = np.cross(Vin[F[:, 1]] - Vin[F[:, 0]], Vin[F[:, 2]] - Vin[F[:, 0]])
     area = np.linalg.norm(N, axis=1); Nn = N / np.maximum(area[:, None], 1e-300)
     # dihedral angles of interior edges among F
-    e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
-    fid = np.tile(np.arange(len(F)), 3)
-    key = np.minimum(e[:, 0], e[:, 1]) * (len(Vin) + 1) + np.maximum(e[:, 0], e[:, 1])
-    o = np.argsort(key); ks = key[o]
-    same = np.nonzero(ks[1:] == ks[:-1])[0]
-    f1 = fid[o][same]; f2 = fid[o][same + 1]
-    ang = np.degrees(np.arccos(np.clip((Nn[f1] * Nn[f2]).sum(1), -1, 1)))
+    ang = dihedral_angles(Vin, F, Nn)
     navg = (Nn * area[:, None]).sum(0); navg /= max(np.linalg.norm(navg), 1e-300)
     dev = np.degrees(np.arccos(np.clip(Nn @ navg, -1, 1)))
     perim = np.linalg.norm(np.roll(P, -1, 0) - P, axis=1).sum()
