@@ -1,7 +1,7 @@
 //! The queue worker against a real nats-server (JetStream, a free loopback port, a
 //! temporary store): exactly-once repair by several workers, a worker killed with
-//! SIGKILL mid-repair, the server restarted mid-run, a file that crashes its worker
-//! every time. Ignored where no nats-server is installed (`.ci/run` installs it).
+//! SIGKILL mid-repair, the server restarted mid-run or silent as a worker reads a scan,
+//! a file that crashes its worker every time. Ignored where no nats-server is installed (`.ci/run` installs it).
 
 mod common;
 mod metrics_support;
@@ -366,4 +366,54 @@ fn worker_metrics_match_a_run_of_20_scans_with_2_failing() {
     assert_eq!(must(&t, "holefill_file_faces_sum"), faces);
     assert!(!want.is_empty());
     assert_eq!(family(&t, "holefill_holes_total"), want);
+}
+
+/// Regression (the CI run of stop 40): async-nats' object reader unwraps the making of
+/// its consumer, so a server that did not answer as a worker began reading a scan's
+/// chunks (there: restarted) panicked the worker's only slot, and no scan after it was
+/// repaired. The worker now reads objects itself: the scan is tried again, and the slot
+/// goes on.
+#[test]
+#[cfg_attr(not(has_nats_server), ignore = "needs nats-server")]
+fn a_server_silent_as_a_worker_reads_a_scan_costs_a_retry_not_the_slot() {
+    let nats = Nats::start();
+    let src = tempfile::tempdir().unwrap();
+    let n = 3;
+    let files = write_meshes(src.path(), "g", n);
+    let args = ["--ack-wait-secs", "4", "--backoff-secs", "1"];
+    let w = Worker::start(
+        &nats,
+        &args,
+        &[("HOLEFILL_TEST_PAUSE_AT", "chunks:1000:g001")],
+    );
+    assert_eq!(submit(&nats, &files).len(), n);
+    assert!(
+        wait_until(Duration::from_secs(30), || w
+            .log()
+            .contains("pausing 1000 ms at chunks")),
+        "{}",
+        w.log()
+    );
+    // silent across the end of the pause: the request that makes the consumer of
+    // g001's chunks times out (the client's request timeout: 10 s)
+    nats.freeze(Duration::from_secs(12));
+    let out = tempfile::tempdir().unwrap();
+    let ok = wait_until(Duration::from_secs(90), || {
+        let _ = std::process::Command::new(bin())
+            .args(["results", "--nats", &nats.url()])
+            .arg(out.path())
+            .output();
+        logs(out.path()).len() >= n
+    });
+    assert!(ok, "{} of {n}\n{}", logs(out.path()).len(), w.log());
+    let l = logs(out.path());
+    for i in 0..n {
+        assert_eq!(l[&format!("g{i:03}.obj.repair.json")]["status"], "repaired");
+    }
+    let log = w.log();
+    assert!(!log.contains("panicked"), "{log}");
+    assert!(
+        log.contains("g001.obj") && log.contains("cannot read its chunks"),
+        "the read of g001 did not meet the server's absence:\n{log}"
+    );
 }

@@ -11,8 +11,8 @@
 //!   kernel's OOM killer would);
 //! - `HOLEFILL_TEST_DIE_AT=POINT[:SUBSTR]`: the daemon itself dies (SIGKILL) when the
 //!   file reaches POINT, one of the named steps of its handling (see [`POINTS`]);
-//! - `HOLEFILL_TEST_PAUSE_AT=POINT:MS[:SUBSTR]`: the daemon sleeps MS milliseconds at
-//!   POINT (to widen a race window on purpose).
+//! - `HOLEFILL_TEST_PAUSE_AT=POINT:MS[:SUBSTR]`: the daemon (or the queue worker, at
+//!   `chunks`) sleeps MS milliseconds at POINT (to widen a race window on purpose).
 
 use std::ffi::OsStr;
 
@@ -42,6 +42,9 @@ pub const POINTS: &[&str] = &[
     "failed-moved",
     // just before a file is moved into a shared folder (inbox, failed, archive)
     "move",
+    // the queue worker: an object's info and stream are read, the consumer of its
+    // chunks not yet made (the pause only; the worker sleeps without blocking)
+    "chunks",
 ];
 
 /// The hooks in force (all empty without the `test-hooks` feature).
@@ -153,18 +156,30 @@ impl Hooks {
         }
     }
 
+    /// How long to pause at `point` with the file `name` (`HOLEFILL_TEST_PAUSE_AT`),
+    /// logged; the caller sleeps.
+    pub fn pause(&self, point: &str, name: &OsStr) -> Option<std::time::Duration> {
+        debug_assert!(POINTS.contains(&point), "{point}");
+        #[cfg(feature = "test-hooks")]
+        if let Some((p, ms, sub)) = &self.pause_at {
+            if p == point && name.to_string_lossy().contains(sub.as_str()) {
+                tracing::warn!("test hook: pausing {ms} ms at {point}");
+                return Some(std::time::Duration::from_millis(*ms));
+            }
+        }
+        let _ = (point, name);
+        None
+    }
+
     /// The daemon reached `point` with the file `name`: die or pause if asked to.
     pub fn at(&self, point: &str, name: &OsStr) {
         debug_assert!(POINTS.contains(&point), "{point}");
+        if let Some(d) = self.pause(point, name) {
+            std::thread::sleep(d);
+        }
         #[cfg(feature = "test-hooks")]
         {
             let n = name.to_string_lossy();
-            if let Some((p, ms, sub)) = &self.pause_at {
-                if p == point && n.contains(sub.as_str()) {
-                    tracing::warn!("test hook: pausing {ms} ms at {point}");
-                    std::thread::sleep(std::time::Duration::from_millis(*ms));
-                }
-            }
             if let Some((p, sub)) = &self.die_at {
                 if p == point && n.contains(sub.as_str()) {
                     eprintln!("test hook: dying at {point}");

@@ -4,7 +4,6 @@
 use super::config::{Names, QueueSettings};
 use super::queue::{self, Buckets, Conn};
 use super::scan::{self, DoneMsg, FileEntry, ScanMsg};
-use super::work::get_bytes;
 use anyhow::{anyhow, bail, Context as _, Result};
 use async_nats::jetstream::{self, consumer};
 use futures_util::StreamExt;
@@ -55,7 +54,7 @@ pub async fn submit(
 ) -> Result<Submitted> {
     for (f, bytes) in msg.files.iter().zip(contents) {
         let object = msg.object(&f.name);
-        let have = match buckets.scans.info(&object).await {
+        let have = match buckets.scans.store.info(&object).await {
             Ok(i) => !i.deleted && i.size as u64 == f.size,
             Err(_) => false,
         };
@@ -63,6 +62,7 @@ pub async fn submit(
             let mut r: &[u8] = bytes;
             buckets
                 .scans
+                .store
                 .put(object.as_str(), &mut r)
                 .await
                 .map_err(|e| anyhow!("cannot upload {object}: {e}"))?;
@@ -180,7 +180,7 @@ pub async fn results(
             } else {
                 &names.failed
             };
-            let bucket = match conn.js.get_object_store(bucket_name).await {
+            let bucket = match queue::existing_bucket(conn, bucket_name).await {
                 Ok(b) => b,
                 Err(e) => {
                     tracing::error!("object store {bucket_name}: {e}");
@@ -216,18 +216,14 @@ pub async fn results(
 /// `.DIGEST12` before the extension; a set (an OBJ with its MTL and images) goes whole
 /// into the folder `dir/STEM.DIGEST12/` under its own names, so the OBJ's `mtllib` and
 /// the MTL's image names still find their files.
-pub async fn fetch_result(
-    bucket: &async_nats::jetstream::object_store::ObjectStore,
-    done: &DoneMsg,
-    dir: &Path,
-) -> Result<PathBuf> {
+pub async fn fetch_result(bucket: &queue::Bucket, done: &DoneMsg, dir: &Path) -> Result<PathBuf> {
     for f in &done.files {
         scan::check_name(f)?;
     }
     let mut contents = Vec::new();
     for f in &done.files {
         let object = format!("{}/{}", done.key, f);
-        contents.push(get_bytes(bucket, &object, 16 << 30).await?);
+        contents.push(bucket.read_bytes(&object, 16 << 30).await?);
     }
     let taken_by_other =
         done.files

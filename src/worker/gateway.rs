@@ -16,7 +16,6 @@
 use super::config::{Names, QueueSettings};
 use super::queue::{self, Buckets, Conn};
 use super::scan::{DoneMsg, ScanMsg};
-use super::work::get_bytes;
 use crate::daemon::child::ChildEnd;
 use anyhow::{anyhow, Result};
 use futures_util::StreamExt;
@@ -212,15 +211,16 @@ impl Forwarder {
         use async_nats::jetstream::object_store::InfoErrorKind;
         let log_object = msg.object(&msg.log_name());
         for (bucket, repaired) in [(&self.buckets.results, true), (&self.buckets.failed, false)] {
-            match bucket.info(&log_object).await {
+            match bucket.store.info(&log_object).await {
                 Ok(i) if !i.deleted => {
-                    let text = get_bytes(bucket, &log_object, 256 << 20).await?;
+                    let text = bucket.read_bytes(&log_object, 256 << 20).await?;
                     let v: Value = serde_json::from_slice(&text)
                         .map_err(|e| anyhow!("{log_object}: not a repair log: {e}"))?;
                     let error = v["error"].as_str().unwrap_or("").to_string();
                     let end = if repaired {
-                        let model =
-                            get_bytes(bucket, &msg.object(&msg.scan), u64::MAX >> 1).await?;
+                        let model = bucket
+                            .read_bytes(&msg.object(&msg.scan), u64::MAX >> 1)
+                            .await?;
                         write(out, &model)?;
                         let code = v["worker"]["worker_exit"].as_i64().unwrap_or(0) as i32;
                         ChildEnd::Exit(code)

@@ -269,12 +269,13 @@ pub fn run_worker(args: WorkerArgs) -> Result<()> {
             tracing::info!("metrics at http://{bound}/metrics");
         }
         let conn = queue::connect(&loaded.url, "holefill-worker").await?;
-        let buckets = queue::retry(
+        let mut buckets = queue::retry(
             "the queue's streams and buckets",
             Duration::from_secs(3600),
             || queue::setup(&conn, &names, &queue_settings),
         )
         .await?;
+        buckets.scans.hooks = hooks.clone();
         let ctx = Arc::new(work::WorkerCtx {
             conn,
             names: names.clone(),

@@ -129,10 +129,187 @@ pub async fn workers_consumer(
         .map_err(|e| anyhow!("consumer {}: {e}", n.consumer))
 }
 
+/// An object store and its name. Objects are read here ([`Bucket::read`]) and not
+/// through `async_nats`' `Object` reader, which unwraps the result of making its
+/// consumer and so panics when the server is away at that moment (async-nats 0.46,
+/// `object_store/mod.rs`: a worker slot died that way in a server restart).
+#[derive(Clone)]
+pub struct Bucket {
+    pub name: String,
+    pub store: object_store::ObjectStore,
+    js: jetstream::Context,
+    /// The worker's test hooks (a pause at `chunks`).
+    pub hooks: crate::daemon::hooks::Hooks,
+}
+
+/// Why an object could not be read.
+#[derive(Debug)]
+pub enum ReadError {
+    /// Not in the bucket (never stored, deleted or expired).
+    Missing,
+    /// Its stored size, larger than the caller's limit.
+    TooLarge(u64),
+    /// The server or the object's chunks (retrying may help).
+    Other(anyhow::Error),
+}
+
+impl std::fmt::Display for ReadError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ReadError::Missing => write!(f, "not in the bucket"),
+            ReadError::TooLarge(n) => write!(f, "{n} bytes, more than allowed"),
+            ReadError::Other(e) => write!(f, "{e:#}"),
+        }
+    }
+}
+
+/// How long one chunk of an object may take to arrive.
+const CHUNK_WAIT: Duration = Duration::from_secs(30);
+
+impl Bucket {
+    /// Writes the object `name` into `out` (at most `max` bytes) and returns its size
+    /// and SHA-256 (hex). The chunks are read in order through an ordered consumer on
+    /// the bucket's stream (`OBJ_<bucket>`, subject `$O.<bucket>.C.<nuid>`, as ADR-20
+    /// lays out an object store); their count, total size and digest are checked
+    /// against the object's info.
+    pub async fn read<W>(
+        &self,
+        name: &str,
+        max: u64,
+        out: &mut W,
+    ) -> Result<(u64, String), ReadError>
+    where
+        W: tokio::io::AsyncWrite + Unpin,
+    {
+        use base64::Engine as _;
+        use futures_util::StreamExt as _;
+        use object_store::InfoErrorKind;
+        use sha2::Digest as _;
+        use tokio::io::AsyncWriteExt as _;
+        let other = |what: &str, e: &dyn std::fmt::Display| {
+            ReadError::Other(anyhow!("{}/{name}: {what}: {e}", self.name))
+        };
+        let info = match self.store.info(name).await {
+            Ok(i) if !i.deleted => i,
+            Ok(_) => return Err(ReadError::Missing),
+            Err(e) if e.kind() == InfoErrorKind::NotFound => return Err(ReadError::Missing),
+            Err(e) => return Err(other("info", &e)),
+        };
+        if info.options.as_ref().is_some_and(|o| o.link.is_some()) {
+            return Err(other("a link", &"holefill stores no links"));
+        }
+        let size = info.size as u64;
+        if size > max {
+            return Err(ReadError::TooLarge(size));
+        }
+        let mut h = sha2::Sha256::new();
+        let mut total = 0u64;
+        if info.chunks > 0 {
+            let stream = self
+                .js
+                .get_stream(format!("OBJ_{}", self.name))
+                .await
+                .map_err(|e| other("its stream", &e))?;
+            if let Some(d) = self.hooks.pause("chunks", name.as_ref()) {
+                tokio::time::sleep(d).await;
+            }
+            let consumer = stream
+                .create_consumer(consumer::push::OrderedConfig {
+                    deliver_subject: self.js.client().new_inbox(),
+                    filter_subject: format!("$O.{}.C.{}", self.name, info.nuid),
+                    ..Default::default()
+                })
+                .await
+                .map_err(|e| other("cannot read its chunks", &e))?;
+            let mut chunks = consumer
+                .messages()
+                .await
+                .map_err(|e| other("cannot read its chunks", &e))?;
+            for i in 0..info.chunks {
+                let m = match tokio::time::timeout(CHUNK_WAIT, chunks.next()).await {
+                    Err(_) => {
+                        return Err(other(
+                            &format!("chunk {} of {}", i + 1, info.chunks),
+                            &format!("none within {} s", CHUNK_WAIT.as_secs()),
+                        ))
+                    }
+                    Ok(None) => {
+                        return Err(other(
+                            &format!("chunk {} of {}", i + 1, info.chunks),
+                            &"the subscription ended",
+                        ))
+                    }
+                    Ok(Some(Err(e))) => {
+                        return Err(other(&format!("chunk {} of {}", i + 1, info.chunks), &e))
+                    }
+                    Ok(Some(Ok(m))) => m,
+                };
+                total += m.payload.len() as u64;
+                if total > size {
+                    return Err(other("chunks", &format!("more than its {size} bytes")));
+                }
+                h.update(&m.payload);
+                out.write_all(&m.payload)
+                    .await
+                    .map_err(|e| other("write", &e))?;
+            }
+        }
+        if total != size {
+            return Err(other(
+                "chunks",
+                &format!("{total} bytes, its info says {size}"),
+            ));
+        }
+        let digest = h.finalize();
+        if let Some(want) = info
+            .digest
+            .as_deref()
+            .and_then(|d| d.strip_prefix("SHA-256="))
+        {
+            let want = base64::engine::general_purpose::URL_SAFE_NO_PAD
+                .decode(want.trim_end_matches('='))
+                .map_err(|e| other("its digest", &e))?;
+            if want.as_slice() != digest.as_slice() {
+                return Err(other("chunks", &"their SHA-256 is not the object's digest"));
+            }
+        }
+        out.flush().await.map_err(|e| other("write", &e))?;
+        Ok((total, crate::worker::scan::hex(&digest)))
+    }
+
+    /// The object's bytes, at most `max` of them.
+    pub async fn read_bytes(&self, name: &str, max: u64) -> Result<Vec<u8>> {
+        let mut v = Vec::new();
+        match self.read(name, max, &mut v).await {
+            Ok(_) => Ok(v),
+            Err(ReadError::Missing) => Err(anyhow!("{}/{name}: not in the bucket", self.name)),
+            Err(ReadError::TooLarge(n)) => Err(anyhow!(
+                "{}/{name}: {n} bytes, larger than {max}",
+                self.name
+            )),
+            Err(ReadError::Other(e)) => Err(e),
+        }
+    }
+}
+
+/// Gets an existing object store as a [`Bucket`].
+pub async fn existing_bucket(c: &Conn, name: &str) -> Result<Bucket> {
+    let store =
+        c.js.get_object_store(name)
+            .await
+            .map_err(|e| anyhow!("object store {name}: {e}"))?;
+    Ok(Bucket {
+        name: name.to_string(),
+        store,
+        js: c.js.clone(),
+        hooks: Default::default(),
+    })
+}
+
 /// An object store: file storage, `replicas`, `max_age`.
-pub async fn bucket(c: &Conn, name: &str, s: &QueueSettings) -> Result<object_store::ObjectStore> {
-    match c.js.get_object_store(name).await {
-        Ok(b) => Ok(b),
+pub async fn bucket(c: &Conn, name: &str, s: &QueueSettings) -> Result<Bucket> {
+    let store = match c.js.get_object_store(name).await {
+        Ok(b) => b,
         Err(e) if e.kind() == jetstream::context::ObjectStoreErrorKind::GetStore => {
             let cfg = object_store::Config {
                 bucket: name.to_string(),
@@ -143,25 +320,31 @@ pub async fn bucket(c: &Conn, name: &str, s: &QueueSettings) -> Result<object_st
                 ..Default::default()
             };
             match c.js.create_object_store(cfg).await {
-                Ok(b) => Ok(b),
+                Ok(b) => b,
                 // made meanwhile by another worker
                 Err(e) => {
                     c.js.get_object_store(name)
                         .await
-                        .map_err(|_| anyhow!("object store {name}: {e}"))
+                        .map_err(|_| anyhow!("object store {name}: {e}"))?
                 }
             }
         }
-        Err(e) => Err(anyhow!("object store {name}: {e}")),
-    }
+        Err(e) => return Err(anyhow!("object store {name}: {e}")),
+    };
+    Ok(Bucket {
+        name: name.to_string(),
+        store,
+        js: c.js.clone(),
+        hooks: Default::default(),
+    })
 }
 
 /// Everything a worker, a submitter or a gateway uses.
 #[derive(Clone)]
 pub struct Buckets {
-    pub scans: object_store::ObjectStore,
-    pub results: object_store::ObjectStore,
-    pub failed: object_store::ObjectStore,
+    pub scans: Bucket,
+    pub results: Bucket,
+    pub failed: Bucket,
 }
 
 /// Gets or makes the three buckets and both streams.

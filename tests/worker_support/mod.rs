@@ -97,6 +97,27 @@ impl Nats {
         self.spawn();
     }
 
+    /// The server stops answering for `d` (SIGSTOP, then SIGCONT): the connections
+    /// stay open and the requests sent meanwhile time out.
+    pub fn freeze(&self, d: Duration) {
+        let pid = self
+            .child
+            .as_ref()
+            .expect("a running server")
+            .id()
+            .to_string();
+        let signal = |s: &str| {
+            let ok = Command::new("kill")
+                .args([s, &pid])
+                .status()
+                .is_ok_and(|st| st.success());
+            assert!(ok, "kill {s} {pid}");
+        };
+        signal("-STOP");
+        std::thread::sleep(d);
+        signal("-CONT");
+    }
+
     pub fn kill(&mut self) {
         if let Some(mut c) = self.child.take() {
             let _ = c.kill();

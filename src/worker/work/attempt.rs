@@ -8,7 +8,6 @@ use anyhow::{anyhow, Result};
 use serde_json::Value;
 use std::path::Path;
 use std::sync::Arc;
-use tokio::io::AsyncWriteExt;
 use tokio::sync::watch;
 
 /// Downloads the set, runs the child, reads its outputs.
@@ -180,53 +179,23 @@ enum Download {
 
 /// Downloads an object into `path` (created new), at most `size` bytes; its SHA-256.
 async fn download(
-    bucket: &async_nats::jetstream::object_store::ObjectStore,
+    bucket: &crate::worker::queue::Bucket,
     object: &str,
     path: &Path,
     size: u64,
 ) -> Result<String, Download> {
-    use async_nats::jetstream::object_store::GetErrorKind;
-    use tokio::io::AsyncReadExt;
-    let obj = match bucket.get(object).await {
-        Ok(o) => o,
-        Err(e) if e.kind() == GetErrorKind::NotFound => return Err(Download::Missing),
-        Err(e) => return Err(Download::Other(anyhow!("{e}"))),
-    };
-    if obj.info().size as u64 != size {
-        return Err(Download::Size(obj.info().size as u64));
-    }
+    use crate::worker::queue::ReadError;
     let mut f = tokio::fs::OpenOptions::new()
         .write(true)
         .create_new(true)
         .open(path)
         .await
         .map_err(|e| Download::Other(anyhow!("{}: {e}", path.display())))?;
-    let mut reader = obj.take(size.saturating_add(1));
-    let mut h = <sha2::Sha256 as sha2::Digest>::new();
-    let mut buf = vec![0u8; 128 * 1024];
-    let mut total = 0u64;
-    loop {
-        let n = reader
-            .read(&mut buf)
-            .await
-            .map_err(|e| Download::Other(anyhow!("{e}")))?;
-        if n == 0 {
-            break;
-        }
-        total += n as u64;
-        if total > size {
-            return Err(Download::Size(total));
-        }
-        sha2::Digest::update(&mut h, &buf[..n]);
-        f.write_all(&buf[..n])
-            .await
-            .map_err(|e| Download::Other(anyhow!("{}: {e}", path.display())))?;
+    match bucket.read(object, size, &mut f).await {
+        Ok((n, _)) if n != size => Err(Download::Size(n)),
+        Ok((_, sha)) => Ok(sha),
+        Err(ReadError::Missing) => Err(Download::Missing),
+        Err(ReadError::TooLarge(n)) => Err(Download::Size(n)),
+        Err(ReadError::Other(e)) => Err(Download::Other(e)),
     }
-    if total != size {
-        return Err(Download::Size(total));
-    }
-    f.flush()
-        .await
-        .map_err(|e| Download::Other(anyhow!("{}: {e}", path.display())))?;
-    Ok(crate::worker::scan::hex(&sha2::Digest::finalize(h)))
 }

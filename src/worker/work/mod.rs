@@ -46,7 +46,6 @@ mod attempt;
 mod store;
 
 use attempt::attempt;
-pub use store::get_bytes;
 use store::{final_log, notify, store_failed, store_repaired, stored_outcome};
 
 /// What a worker process runs with.
@@ -93,6 +92,34 @@ impl WorkerCtx {
             hooks: &self.hooks,
             picture: None,
             resources: &[],
+        }
+    }
+}
+
+/// Runs [`slot`] number `n` again whenever it panics (a library's unwrap on a server
+/// error, say): the message it held is not acknowledged, so the server hands it out
+/// again after the ack wait, and the worker keeps its slots.
+async fn supervised_slot(
+    n: usize,
+    ctx: Arc<WorkerCtx>,
+    consumer: jetstream::consumer::PullConsumer,
+    stop: watch::Receiver<bool>,
+    cancel: watch::Receiver<bool>,
+) {
+    loop {
+        let run = tokio::spawn(slot(
+            ctx.clone(),
+            consumer.clone(),
+            stop.clone(),
+            cancel.clone(),
+        ));
+        match run.await {
+            Ok(()) => return,
+            Err(e) if e.is_panic() && !*stop.borrow() => {
+                tracing::error!("slot {n} panicked; it starts again ({e})");
+                tokio::time::sleep(Duration::from_millis(500)).await;
+            }
+            Err(_) => return,
         }
     }
 }
@@ -398,8 +425,9 @@ pub async fn run(ctx: Arc<WorkerCtx>, slots: usize, grace: Duration) -> Result<(
         })
     });
     let mut tasks = Vec::new();
-    for _ in 0..slots {
-        tasks.push(tokio::spawn(slot(
+    for n in 0..slots {
+        tasks.push(tokio::spawn(supervised_slot(
+            n,
             ctx.clone(),
             consumer.clone(),
             stop_rx.clone(),

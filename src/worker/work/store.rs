@@ -15,7 +15,7 @@ pub(super) async fn stored_outcome(ctx: &WorkerCtx, scan: &ScanMsg) -> Result<Op
         (&ctx.buckets.results, "repaired", &ctx.names.results),
         (&ctx.buckets.failed, "failed", &ctx.names.failed),
     ] {
-        match bucket.info(&log).await {
+        match bucket.store.info(&log).await {
             Ok(i) if !i.deleted => {
                 let mut files: Vec<String> = Vec::new();
                 let (stage, error) = match status {
@@ -27,6 +27,7 @@ pub(super) async fn stored_outcome(ctx: &WorkerCtx, scan: &ScanMsg) -> Result<Op
                         // which of the submitted files were kept with the log
                         for f in &scan.files {
                             if bucket
+                                .store
                                 .info(scan.object(&f.name))
                                 .await
                                 .is_ok_and(|i| !i.deleted)
@@ -50,10 +51,10 @@ pub(super) async fn stored_outcome(ctx: &WorkerCtx, scan: &ScanMsg) -> Result<Op
 }
 
 async fn read_stage(
-    bucket: &async_nats::jetstream::object_store::ObjectStore,
+    bucket: &crate::worker::queue::Bucket,
     log: &str,
 ) -> (Option<String>, Option<String>) {
-    let Ok(bytes) = get_bytes(bucket, log, 64 << 20).await else {
+    let Ok(bytes) = bucket.read_bytes(log, 64 << 20).await else {
         return (None, None);
     };
     let v: Value = serde_json::from_slice(&bytes).unwrap_or(Value::Null);
@@ -100,48 +101,23 @@ pub(super) async fn notify(ctx: &WorkerCtx, done: &DoneMsg) -> Result<()> {
     Ok(())
 }
 
-/// An object's bytes, at most `max` of them.
-pub async fn get_bytes(
-    bucket: &async_nats::jetstream::object_store::ObjectStore,
-    name: &str,
-    max: u64,
-) -> Result<Vec<u8>> {
-    use tokio::io::AsyncReadExt;
-    let obj = bucket.get(name).await.map_err(|e| anyhow!("{name}: {e}"))?;
-    let mut v = Vec::new();
-    obj.take(max.saturating_add(1))
-        .read_to_end(&mut v)
-        .await
-        .with_context(|| format!("{name}: read"))?;
-    if v.len() as u64 > max {
-        bail!("{name}: larger than {max} bytes");
-    }
-    Ok(v)
-}
-
 /// Puts bytes or a file as an object.
-async fn put_file(
-    bucket: &async_nats::jetstream::object_store::ObjectStore,
-    name: &str,
-    path: &Path,
-) -> Result<()> {
+async fn put_file(bucket: &crate::worker::queue::Bucket, name: &str, path: &Path) -> Result<()> {
     let mut f = tokio::fs::File::open(path)
         .await
         .with_context(|| format!("{}", path.display()))?;
     bucket
+        .store
         .put(name, &mut f)
         .await
         .map_err(|e| anyhow!("cannot store {name}: {e}"))?;
     Ok(())
 }
 
-async fn put_bytes(
-    bucket: &async_nats::jetstream::object_store::ObjectStore,
-    name: &str,
-    bytes: &[u8],
-) -> Result<()> {
+async fn put_bytes(bucket: &crate::worker::queue::Bucket, name: &str, bytes: &[u8]) -> Result<()> {
     let mut r = bytes;
     bucket
+        .store
         .put(name, &mut r)
         .await
         .map_err(|e| anyhow!("cannot store {name}: {e}"))?;
