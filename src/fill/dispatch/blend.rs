@@ -90,6 +90,7 @@ pub fn blended(
     tried: &[Attempt],
     patch: Patch,
     q: PatchQuality,
+    guide: Option<Guide>,
 ) -> (Patch, PatchQuality, Option<BlendReport>) {
     if !applies(policy, hole, method, &patch) {
         return (patch, q, None);
@@ -97,15 +98,41 @@ pub fn blended(
     if let Some(why) = already_failed(policy, tried) {
         return (patch, q, Some(not_tried(policy, hole, why)));
     }
-    let (pulled, rep) = pull(mesh, hole, policy, checker, &patch);
+    let (pulled, rep) = pull(mesh, hole, policy, checker, &patch, guide);
     match pulled {
         Some((pulled, q)) => (pulled, q, Some(rep)),
         None => (patch, q, Some(rep)),
     }
 }
 
+/// `blend.with`'s own patch of a hole (or why it made none), and the milliseconds it
+/// took.
+pub type Guide = (Result<Patch, String>, f64);
+
+/// Whether [`guide`] is worth making beside `first`, the first method tried on `hole`
+/// (both on the two cores): the blend applies to `first`'s patch when it is accepted.
+pub fn prefetches(policy: &Policy, hole: &Hole, first: Option<Method>) -> bool {
+    weight(policy, hole.class) > 0.0 && first.is_some_and(|m| m != policy.blend.with)
+}
+
+/// `blend.with`'s own fill of `hole`: no relaxation, checks or variants, its own
+/// `limits.hole_time_ms`. A pure function of the mesh, the hole and the policy, so it
+/// can be made beside the first method ([`prefetches`]) with the same result.
+pub fn guide(mesh: &Mesh, hole: &Hole, policy: &Policy) -> Guide {
+    let t0 = Instant::now();
+    let with = policy.blend.with;
+    let ctx = FillContext {
+        deadline: Deadline::after_ms(policy.limits.hole_time_ms),
+        ..FillContext::new(mesh, hole, policy)
+    };
+    let made = guarded(with, || run_method_unchecked(with, &ctx))
+        .map_err(|why| format!("{} failed: {why}", with.name()));
+    (made, t0.elapsed().as_secs_f64() * 1000.0)
+}
+
 /// `patch` (accepted, by another method) blended with `blend.with`'s patch of the same
-/// hole, with its quality when it passes the checks; and what was done. The blended
+/// hole (`guide`, made here when `None`), with its quality when it passes the checks;
+/// and what was done (its time includes the guide's). The blended
 /// surface is the accepted patch with its new vertices moved the class's weight of
 /// the way to the second patch; with `blend.keep = "with"` the second patch's
 /// triangles are put onto it ([`onto_surface`]) and tried first, then (or with
@@ -117,29 +144,26 @@ pub fn pull(
     policy: &Policy,
     checker: &Checker,
     patch: &Patch,
+    guide: Option<Guide>,
 ) -> (Option<(Patch, PatchQuality)>, BlendReport) {
     let t0 = Instant::now();
     let with = policy.blend.with;
     let w = weight(policy, hole.class);
     let mut rep = not_tried(policy, hole, String::new());
-    let ctx = FillContext {
-        deadline: Deadline::after_ms(policy.limits.hole_time_ms),
-        ..FillContext::new(mesh, hole, policy)
-    };
+    let (made, guide_ms) = guide.unwrap_or_else(|| self::guide(mesh, hole, policy));
+    let elapsed = || guide_ms + t0.elapsed().as_secs_f64() * 1000.0;
     // the blended surface: the accepted patch moved the weight of the way to the
     // guide's (with keep = "with", the guide's vertices are put onto it below)
-    let made = guarded(with, || run_method_unchecked(with, &ctx))
-        .map_err(|why| format!("{} failed: {why}", with.name()))
-        .and_then(|guide| {
-            let pulled = moved(mesh, hole, w, patch, &guide)
-                .ok_or_else(|| format!("{} made no triangle to pull toward", with.name()))?;
-            Ok((guide, pulled))
-        });
+    let made = made.and_then(|guide| {
+        let pulled = moved(mesh, hole, w, patch, &guide)
+            .ok_or_else(|| format!("{} made no triangle to pull toward", with.name()))?;
+        Ok((guide, pulled))
+    });
     let (guide, (pulled, shift)) = match made {
         Ok(m) => m,
         Err(why) => {
             rep.reason = why;
-            rep.ms = t0.elapsed().as_secs_f64() * 1000.0;
+            rep.ms = elapsed();
             return (None, rep);
         }
     };
@@ -193,7 +217,7 @@ pub fn pull(
     }
     // not applied: why; applied with the accepted triangles after "with"'s failed: why
     rep.reason = failures.join("; ");
-    rep.ms = t0.elapsed().as_secs_f64() * 1000.0;
+    rep.ms = elapsed();
     (out, rep)
 }
 
@@ -338,7 +362,7 @@ mod tests {
             .expect("valid");
         let checker = Checker::new(&mesh);
         // the wavefront fills a flat hole flat: the tent comes down halfway
-        let (out, rep) = pull(&mesh, &hole, &policy, &checker, &tent(0.4));
+        let (out, rep) = pull(&mesh, &hole, &policy, &checker, &tent(0.4), None);
         let (p, _) = out.expect("applied");
         assert!(rep.applied, "{rep:?}");
         assert_eq!(rep.kept, Some(BlendKeep::Accepted));
@@ -366,7 +390,7 @@ mod tests {
         let ctx = FillContext::new(&mesh, &hole, &policy);
         let own = run_method_unchecked(Method::Wavefront, &ctx).expect("the wavefront fills");
         assert!(!own.new_vertices.is_empty(), "the wavefront adds vertices");
-        let (out, rep) = pull(&mesh, &hole, &policy, &checker, &tent(0.4));
+        let (out, rep) = pull(&mesh, &hole, &policy, &checker, &tent(0.4), None);
         let (p, _) = out.expect("applied");
         assert!(rep.applied, "{rep:?}");
         assert_eq!(rep.kept, Some(BlendKeep::With));
@@ -382,6 +406,65 @@ mod tests {
         }
         crate::patch::apply_patch(&mut mesh, &hole, &p).expect("applies");
         mesh.validate().expect("valid mesh");
+    }
+
+    #[test]
+    fn a_guide_made_beforehand_gives_the_same_patch_and_counts_in_the_time() {
+        let (mut mesh, hole) = sheet_hole(HoleClass::Middle);
+        let policy = Policy::default()
+            .edit(|s| s.blend.weight_middle = 0.5)
+            .expect("valid");
+        let checker = Checker::new(&mesh);
+        let made = guide(&mesh, &hole, &policy);
+        let own = made.0.clone().expect("the wavefront fills");
+        assert!(!own.new_vertices.is_empty());
+        let (here, _) = pull(&mesh, &hole, &policy, &checker, &tent(0.4), None);
+        let (before, rep) = pull(&mesh, &hole, &policy, &checker, &tent(0.4), Some(made));
+        let (here, before) = (here.expect("applied").0, before.expect("applied").0);
+        assert_eq!(here.triangles, before.triangles);
+        assert_eq!(here.new_vertices, before.new_vertices, "bit for bit");
+        // a guide that took long is in the blend's time
+        let slow = (Ok(own), 1.0e6);
+        let (_, rep_slow) = pull(&mesh, &hole, &policy, &checker, &tent(0.4), Some(slow));
+        assert!(
+            rep_slow.ms >= 1.0e6 && rep.ms < 1.0e6,
+            "{} {}",
+            rep_slow.ms,
+            rep.ms
+        );
+        // a guide that failed: not applied, its reason reported
+        let failed = (Err("wavefront failed: no".to_string()), 0.0);
+        let (none, rep) = pull(&mesh, &hole, &policy, &checker, &tent(0.4), Some(failed));
+        assert!(
+            none.is_none() && !rep.applied && rep.reason.contains("no"),
+            "{rep:?}"
+        );
+        crate::patch::apply_patch(&mut mesh, &hole, &here).expect("applies");
+        mesh.validate().expect("valid mesh");
+    }
+
+    #[test]
+    fn the_guide_is_made_beforehand_only_where_the_first_method_would_be_blended() {
+        let on = Policy::default()
+            .edit(|s| s.blend.weight_large = 0.5)
+            .expect("valid");
+        let (_, large) = sheet_hole(HoleClass::Large);
+        let (_, middle) = sheet_hole(HoleClass::Middle);
+        assert!(prefetches(&on, &large, Some(Method::MinAreaFair)));
+        assert!(
+            !prefetches(&on, &large, Some(Method::Wavefront)),
+            "the guide itself"
+        );
+        assert!(!prefetches(&on, &large, None));
+        assert!(
+            !prefetches(&on, &middle, Some(Method::MinAreaFair)),
+            "weight 0"
+        );
+        assert!(!prefetches(
+            &Policy::default(),
+            &large,
+            Some(Method::MinAreaFair)
+        ));
     }
 
     #[test]

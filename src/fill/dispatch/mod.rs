@@ -181,11 +181,21 @@ fn attempt(
 pub fn propose(mesh: &Mesh, hole: &Hole, policy: &Policy, checker: &Checker) -> Proposal {
     let t0 = Instant::now();
     let (order, selection) = select::order(mesh, hole, policy, methods_for(policy, hole.class));
-    let mut p = propose_from(mesh, hole, policy, checker, order, 0);
+    // the blend's second fill beside the first method, when the blend would use it
+    let (mut p, guide) = if blend::prefetches(policy, hole, order.first().copied()) {
+        let (p, g) = rayon::join(
+            || propose_from(mesh, hole, policy, checker, order, 0),
+            || blend::guide(mesh, hole, policy),
+        );
+        (p, Some(g))
+    } else {
+        (propose_from(mesh, hole, policy, checker, order, 0), None)
+    };
     p.selection = selection;
     if let Some((i, patch, q, ms)) = p.accepted.take() {
-        let (patch, q, rep) =
-            blend::blended(mesh, hole, policy, checker, p.order[i], &p.tried, patch, q);
+        let (patch, q, rep) = blend::blended(
+            mesh, hole, policy, checker, p.order[i], &p.tried, patch, q, guide,
+        );
         let ms = ms + rep.as_ref().map_or(0.0, |r| r.ms);
         p.blend = rep;
         p.accepted = Some((i, patch, q, ms));
