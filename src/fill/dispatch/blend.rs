@@ -181,6 +181,7 @@ pub fn pull(
         )
         .map_or_else(|| check(&p).map(|q| (p, q)), Ok)
     };
+    let t_moved = t0.elapsed();
     let mut order = Vec::new();
     if policy.blend.keep == BlendKeep::With && !guide.new_vertices.is_empty() {
         if let Some(onto) = onto_surface(mesh, hole, &guide, &pulled, policy.fair.tangential_relax)
@@ -189,6 +190,7 @@ pub fn pull(
         }
     }
     order.push((BlendKeep::Accepted, (pulled, shift)));
+    let t_onto = t0.elapsed();
     let mut out = None;
     let mut failures = Vec::new();
     for (keep, (p, shift)) in order {
@@ -218,6 +220,15 @@ pub fn pull(
     // not applied: why; applied with the accepted triangles after "with"'s failed: why
     rep.reason = failures.join("; ");
     rep.ms = elapsed();
+    tracing::debug!(
+        hole = hole.id,
+        guide_ms,
+        moved_ms = t_moved.as_secs_f64() * 1e3,
+        onto_ms = (t_onto - t_moved).as_secs_f64() * 1e3,
+        settled_ms = (t0.elapsed() - t_onto).as_secs_f64() * 1e3,
+        kept = ?rep.kept,
+        "blend done"
+    );
     (out, rep)
 }
 
