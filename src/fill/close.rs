@@ -238,6 +238,7 @@ mod tests {
             deadline: Deadline::none(),
             checker: Some(&checker),
             rim_bound: false,
+            guide: false,
         };
         let (patch, q) = fill_checked(&ctx).unwrap();
         assert!(patch.new_vertices.is_empty());

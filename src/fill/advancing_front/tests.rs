@@ -793,6 +793,7 @@ fn gives_up_at_once_past_the_patch_size_limit() {
         deadline: Deadline::none(),
         checker: None,
         rim_bound: false,
+        guide: false,
     });
     policy = policy
         .edit(|s| s.limits.max_patch_triangles = (est as usize + 1).max(100))

@@ -4,7 +4,8 @@
 //! Where the lost surface bends, the thin plate (`min_area_fair`) tends to flatten it
 //! and the wavefront's rows to carry the rim's slope on too far, so their errors are
 //! often of opposite sign and their mean is closer than either. The hole is filled
-//! again by `blend.with` (its own fill, without relaxation, checks or variants), and
+//! again by `blend.with` (its first variant, relaxed where that passes the checks, as
+//! made where it fails them: a guide, [`FillContext::guide`]), and
 //! each new vertex of the accepted patch moves its class's weight
 //! (`blend.weight_middle`, `blend.weight_large`) of the way to the closest point of
 //! that patch: the blended surface. With `blend.keep = "with"` the second patch's own
@@ -115,14 +116,15 @@ pub fn prefetches(policy: &Policy, hole: &Hole, first: Option<Method>) -> bool {
     weight(policy, hole.class) > 0.0 && first.is_some_and(|m| m != policy.blend.with)
 }
 
-/// `blend.with`'s own fill of `hole`: no relaxation, checks or variants, its own
-/// `limits.hole_time_ms`. A pure function of the mesh, the hole and the policy, so it
+/// `blend.with`'s own fill of `hole` as a guide ([`FillContext::guide`]: its first
+/// variant, as made where it fails the checks), with its own `limits.hole_time_ms`. A pure function of the mesh, the hole and the policy, so it
 /// can be made beside the first method ([`prefetches`]) with the same result.
 pub fn guide(mesh: &Mesh, hole: &Hole, policy: &Policy) -> Guide {
     let t0 = Instant::now();
     let with = policy.blend.with;
     let ctx = FillContext {
         deadline: Deadline::after_ms(policy.limits.hole_time_ms),
+        guide: true,
         ..FillContext::new(mesh, hole, policy)
     };
     let made = guarded(with, || run_method_unchecked(with, &ctx))

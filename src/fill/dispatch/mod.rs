@@ -126,6 +126,7 @@ fn attempt(
         deadline: Deadline::after_ms(policy.limits.hole_time_ms),
         checker: Some(checker),
         rim_bound,
+        guide: false,
     };
     let failed = |outcome, reason: String| Attempt {
         method,

@@ -220,6 +220,7 @@ pub fn validate(mesh: &Mesh, hole: &Hole, policy: &Policy, candidates: &[Method]
             deadline,
             checker: None,
             rim_bound: false,
+            guide: false,
         };
         let run = guarded(method, || run_method_unchecked(method, &ctx));
         let c = match run {

@@ -19,7 +19,8 @@
 //! passes where four full fronts meet one mesh face). After a method of the hole's
 //! list has stopped that way, the later ones run their first variant only
 //! ([`FillContext::rim_bound`]: on that vase hole, `min_area_fair`'s second weight
-//! failed too, 80 ms).
+//! failed too, 80 ms). A patch that is only a surface to pull toward
+//! ([`FillContext::guide`]) keeps its first variant as made where that fails the checks.
 
 use super::relax::{relax_checked, RELAX_STEP};
 use super::{Cause, FillContext, FillError, VariantFailure, VariantWhy};
@@ -91,6 +92,7 @@ pub fn first_passing_unless(
             deadline: ctx.deadline,
             checker: ctx.checker,
             rim_bound: ctx.rim_bound,
+            guide: ctx.guide,
         };
         let t = std::time::Instant::now();
         let made = run(at, &sub);
@@ -159,6 +161,11 @@ pub fn first_passing_unless(
                         return Ok((relaxed, Some(q)));
                     }
                     return Ok((r, Some(known)));
+                }
+                if ctx.guide {
+                    // a surface to pull toward needs no checks (see FillContext::guide)
+                    tracing::debug!(hole = ctx.hole.id, variant = *name, failure = %e, "guide kept as made");
+                    return Ok((p, None));
                 }
                 failed_at.extend(loop_edge(&p, &e, ctx.hole.len()));
                 reasons.push(VariantFailure {
@@ -606,5 +613,48 @@ mod tests {
                     .unwrap()
             )
         );
+    }
+
+    /// A guide ([`FillContext::guide`]) keeps its first variant as made where that
+    /// fails the checks; the later variants are not run. Elsewhere both are run and
+    /// both rejected.
+    #[test]
+    fn a_guide_keeps_its_first_variant_as_made_when_it_fails_the_checks() {
+        let raw = cut_faces(grid(16, -1.0, 1.0, |_, _| 0.0), |c| c.length() <= 0.55);
+        let (mesh, _) = Mesh::from_raw(&raw);
+        let loose = Policy::default();
+        // no refined patch has every angle at 29.9 degrees or more
+        let strict = loose
+            .edit(|s| s.checks.min_angle_deg = 29.9)
+            .expect("valid");
+        let lp = mesh
+            .topo
+            .boundary_loops()
+            .into_iter()
+            .min_by(|a, b| a.len().cmp(&b.len()))
+            .unwrap();
+        let hole = Hole::new(0, &mesh, lp, &strict);
+        let made = kit_fill(&FillContext::new(&mesh, &hole, &loose)).unwrap();
+        let variants = [("policy", strict.clone()), ("again", strict.clone())];
+        let calls = std::cell::Cell::new(0);
+        let run = |_: usize, _: &FillContext| {
+            calls.set(calls.get() + 1);
+            kit_fill(&FillContext::new(&mesh, &hole, &loose))
+        };
+        let ctx = FillContext::new(&mesh, &hole, &strict);
+        assert!(
+            first_passing_at(&ctx, &variants, run).is_err(),
+            "both rejected"
+        );
+        assert_eq!(calls.get(), 2);
+        calls.set(0);
+        let guide = FillContext {
+            guide: true,
+            ..FillContext::new(&mesh, &hole, &strict)
+        };
+        let (p, q) = first_passing_at(&guide, &variants, run).expect("kept as made");
+        assert_eq!(calls.get(), 1, "the second variant is not run");
+        assert_eq!(q, None, "unchecked");
+        assert_eq!(p, made, "as made, not relaxed");
     }
 }

@@ -706,6 +706,7 @@ fn a_resumed_run_equals_a_fresh_one() {
         deadline: Deadline::none(),
         checker: None,
         rim_bound: false,
+        guide: false,
     };
     let mut short = policy.clone();
     short = short
