@@ -229,13 +229,7 @@ fn a_server_restart_mid_run_loses_nothing() {
     );
     nats.restart(Duration::from_secs(1));
     let out = tempfile::tempdir().unwrap();
-    let ok = wait_until(Duration::from_secs(120), || {
-        let _ = std::process::Command::new(bin())
-            .args(["results", "--nats", &nats.url()])
-            .arg(out.path())
-            .output();
-        logs(out.path()).len() >= n
-    });
+    let ok = results_until(&nats, out.path(), n, Duration::from_secs(120));
     assert!(
         ok,
         "{} of {n}\n{}\n----\n{}\n----\n{}",
@@ -398,13 +392,7 @@ fn a_server_silent_as_a_worker_reads_a_scan_costs_a_retry_not_the_slot() {
     // g001's chunks times out (the client's request timeout: 10 s)
     nats.freeze(Duration::from_secs(12));
     let out = tempfile::tempdir().unwrap();
-    let ok = wait_until(Duration::from_secs(90), || {
-        let _ = std::process::Command::new(bin())
-            .args(["results", "--nats", &nats.url()])
-            .arg(out.path())
-            .output();
-        logs(out.path()).len() >= n
-    });
+    let ok = results_until(&nats, out.path(), n, Duration::from_secs(90));
     assert!(ok, "{} of {n}\n{}", logs(out.path()).len(), w.log());
     let l = logs(out.path());
     for i in 0..n {

@@ -153,16 +153,6 @@ pub enum ReadError {
     Other(anyhow::Error),
 }
 
-impl std::fmt::Display for ReadError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            ReadError::Missing => write!(f, "not in the bucket"),
-            ReadError::TooLarge(n) => write!(f, "{n} bytes, more than allowed"),
-            ReadError::Other(e) => write!(f, "{e:#}"),
-        }
-    }
-}
-
 /// How long one chunk of an object may take to arrive.
 const CHUNK_WAIT: Duration = Duration::from_secs(30);
 
@@ -226,22 +216,14 @@ impl Bucket {
                 .await
                 .map_err(|e| other("cannot read its chunks", &e))?;
             for i in 0..info.chunks {
+                let which = format!("chunk {} of {}", i + 1, info.chunks);
                 let m = match tokio::time::timeout(CHUNK_WAIT, chunks.next()).await {
                     Err(_) => {
-                        return Err(other(
-                            &format!("chunk {} of {}", i + 1, info.chunks),
-                            &format!("none within {} s", CHUNK_WAIT.as_secs()),
-                        ))
+                        let waited = format!("none within {} s", CHUNK_WAIT.as_secs());
+                        return Err(other(&which, &waited));
                     }
-                    Ok(None) => {
-                        return Err(other(
-                            &format!("chunk {} of {}", i + 1, info.chunks),
-                            &"the subscription ended",
-                        ))
-                    }
-                    Ok(Some(Err(e))) => {
-                        return Err(other(&format!("chunk {} of {}", i + 1, info.chunks), &e))
-                    }
+                    Ok(None) => return Err(other(&which, &"the subscription ended")),
+                    Ok(Some(Err(e))) => return Err(other(&which, &e)),
                     Ok(Some(Ok(m))) => m,
                 };
                 total += m.payload.len() as u64;

@@ -253,6 +253,18 @@ pub fn results(nats: &Nats, dir: &Path) {
     holefill(&["results", "--nats", &nats.url(), &dir.display().to_string()]);
 }
 
+/// Runs `holefill results` into `dir` (failures ignored: the server may be away) until
+/// `n` repair logs are there or `timeout` passes; whether they are.
+pub fn results_until(nats: &Nats, dir: &Path, n: usize, timeout: Duration) -> bool {
+    wait_until(timeout, || {
+        let _ = Command::new(bin())
+            .args(["results", "--nats", &nats.url()])
+            .arg(dir)
+            .output();
+        logs(dir).len() >= n
+    })
+}
+
 /// Repair logs (`*.repair.json`) directly in `dir`, by name.
 pub fn logs(dir: &Path) -> HashMap<String, Value> {
     let mut m = HashMap::new();

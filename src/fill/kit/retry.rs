@@ -512,6 +512,19 @@ mod tests {
         Ok(patch)
     }
 
+    /// A flat grid with a round hole in the middle, and that hole's loop.
+    fn holed_grid() -> (Mesh, Vec<crate::mesh::VertexId>) {
+        let raw = cut_faces(grid(16, -1.0, 1.0, |_, _| 0.0), |c| c.length() <= 0.55);
+        let (mesh, _) = Mesh::from_raw(&raw);
+        let lp = mesh
+            .topo
+            .boundary_loops()
+            .into_iter()
+            .min_by(|a, b| a.len().cmp(&b.len()))
+            .unwrap();
+        (mesh, lp)
+    }
+
     /// A failure at a triangle on a loop edge names that edge (also the closing edge
     /// `(k - 1, 0)`); one at an inner triangle or at none names nothing; the variants
     /// stop at the second failure on one edge.
@@ -547,15 +560,8 @@ mod tests {
     /// and the repaired patch passes every check.
     #[test]
     fn a_patch_overlapping_the_mesh_is_repaired_locally() {
-        let raw = cut_faces(grid(16, -1.0, 1.0, |_, _| 0.0), |c| c.length() <= 0.55);
-        let (mesh, _) = Mesh::from_raw(&raw);
+        let (mesh, lp) = holed_grid();
         let policy = Policy::default();
-        let lp = mesh
-            .topo
-            .boundary_loops()
-            .into_iter()
-            .min_by(|a, b| a.len().cmp(&b.len()))
-            .unwrap();
         let hole = Hole::new(0, &mesh, lp, &policy);
         let ctx = FillContext::new(&mesh, &hole, &policy);
         let mut patch = kit_fill(&ctx).unwrap();
@@ -620,19 +626,12 @@ mod tests {
     /// both rejected.
     #[test]
     fn a_guide_keeps_its_first_variant_as_made_when_it_fails_the_checks() {
-        let raw = cut_faces(grid(16, -1.0, 1.0, |_, _| 0.0), |c| c.length() <= 0.55);
-        let (mesh, _) = Mesh::from_raw(&raw);
+        let (mesh, lp) = holed_grid();
         let loose = Policy::default();
         // no refined patch has every angle at 29.9 degrees or more
         let strict = loose
             .edit(|s| s.checks.min_angle_deg = 29.9)
             .expect("valid");
-        let lp = mesh
-            .topo
-            .boundary_loops()
-            .into_iter()
-            .min_by(|a, b| a.len().cmp(&b.len()))
-            .unwrap();
         let hole = Hole::new(0, &mesh, lp, &strict);
         let made = kit_fill(&FillContext::new(&mesh, &hole, &loose)).unwrap();
         let variants = [("policy", strict.clone()), ("again", strict.clone())];
