@@ -311,15 +311,17 @@ fn sharp_ridge_is_segmented_into_two_planes() {
 }
 
 /// A hole wrapping most of the way around a cylinder does not project to a simple
-/// polygon on one plane: HPDE says so (and the dispatcher falls back).
+/// polygon on one plane: the paper's topology says so (and the variants over the
+/// minimum-area surface are tried next).
 #[test]
 fn non_injective_projection_is_a_clean_error() {
     // +-166 degrees around the axis: even the two unfolded planes fold over
     let (mesh, lp) = cylinder_with_hole(32, 24, 2.9, 1.5);
     let mut policy = Policy::default();
     policy = policy.edit(|s| s.hpde.disk_fallback = false).unwrap();
-    let (_, r) = run(&mesh, &lp, &policy);
-    match r {
+    let hole = Hole::new(0, &mesh, lp, &policy);
+    let ctx = FillContext::new(&mesh, &hole, &policy);
+    match fill_with(&ctx, Topology::Plane) {
         Err(e @ FillError::Failed(_)) => {
             assert!(e.to_string().contains("simple polygon on any plane"), "{e}")
         }
@@ -328,6 +330,30 @@ fn non_injective_projection_is_a_clean_error() {
             other.map(|p| p.triangles.len())
         ),
     }
+}
+
+/// The same hole: where no plane variant closes it, the variants over the loop's
+/// minimum-area surface do, with a valid patch near the cylinder.
+#[test]
+fn a_hole_no_plane_sees_closes_over_its_minimum_area_surface() {
+    let (mesh, lp) = cylinder_with_hole(32, 24, 2.9, 1.5);
+    let policy = Policy::default()
+        .edit(|s| s.hpde.disk_fallback = false)
+        .unwrap();
+    let (hole, r) = run(&mesh, &lp, &policy);
+    let patch = r.unwrap();
+    let q = validate(&mesh, &hole, &patch);
+    crate::check::Checker::new(&mesh)
+        .check_patch(&mesh, &hole.vertices, &patch, &policy.checks)
+        .unwrap();
+    let err = patch
+        .new_vertices
+        .iter()
+        .map(|p| (p.truncate().length() - 1.0).abs())
+        .fold(0.0, f64::max);
+    report("cylinder, wound", lp.len(), &patch, q, err);
+    assert!(!patch.new_vertices.is_empty());
+    assert!(err < 0.05, "max |r - 1| = {err}");
 }
 
 /// The self-checked wrapper returns the policy's own patch when it passes the checks

@@ -4,7 +4,7 @@
 use super::predict::{fit_plane, Predicted, Segmentation};
 use crate::fasthash::HashMap;
 use crate::fill::kit::FillError;
-use crate::geometry::measure::{newell_normal, point_in_polygon};
+use crate::geometry::measure::{closest_point_on_triangle, newell_normal, point_in_polygon};
 use crate::geometry::predicates::{self, orient2, p2, P2};
 use glam::{DVec2, DVec3};
 use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
@@ -176,19 +176,7 @@ impl Projection {
             loop2d: Vec::new(),
         };
         let mut l: Vec<DVec2> = if let Kind::Disk = proj.kind {
-            // counter-clockwise by arc length, radius perimeter / 2π
-            let k = bp.len();
-            let lens: Vec<f64> = (0..k).map(|i| (bp[(i + 1) % k] - bp[i]).length()).collect();
-            let per: f64 = lens.iter().sum();
-            let r = per / (2.0 * std::f64::consts::PI);
-            let mut acc = 0.0;
-            let mut out = Vec::with_capacity(k);
-            for len in &lens {
-                let a = acc / per * 2.0 * std::f64::consts::PI;
-                out.push(DVec2::new(a.cos(), a.sin()) * r);
-                acc += len;
-            }
-            out
+            circle(bp)
         } else {
             bp.iter()
                 .enumerate()
@@ -221,6 +209,103 @@ impl Projection {
         };
         DVec2::new(q.x, q.y * self.mirror)
     }
+}
+
+/// The loop on a circle, counter-clockwise by arc length, radius perimeter / 2π.
+fn circle(bp: &[DVec3]) -> Vec<DVec2> {
+    let k = bp.len();
+    let lens: Vec<f64> = (0..k).map(|i| (bp[(i + 1) % k] - bp[i]).length()).collect();
+    let per: f64 = lens.iter().sum();
+    let r = per / (2.0 * std::f64::consts::PI);
+    let mut acc = 0.0;
+    let mut out = Vec::with_capacity(k);
+    for len in &lens {
+        let a = acc / per * 2.0 * std::f64::consts::PI;
+        out.push(DVec2::new(a.cos(), a.sin()) * r);
+        acc += len;
+    }
+    out
+}
+
+/// The loop on a circle (by arc length) and each predicted point where its closest
+/// point on `surface` lands when each triangle of `surface` (loop indices, a
+/// triangulation of the loop without interior vertices) is mapped affinely onto the
+/// triangle of its corners on the circle. A triangulation of a polygon maps onto one of
+/// the convex circle polygon, so the map is one-to-one, and points near each other on
+/// the surface stay near each other in the plane, however the loop winds in space.
+/// With `on_surface`, each point is lifted to its closest point on the surface instead
+/// of its predicted position.
+pub fn over_surface(
+    bp: &[DVec3],
+    surface: &[[u32; 3]],
+    pts: &[Predicted],
+    on_surface: bool,
+) -> Result<OverSurface, FillError> {
+    let l = circle(bp);
+    if let Some(why) = not_simple(&l) {
+        return Err(FillError::bad_loop(format!(
+            "hpde: the loop does not map to a circle ({why})"
+        )));
+    }
+    let corner = |t: &[u32; 3], c: usize| t[c] as usize;
+    if surface
+        .iter()
+        .any(|t| (0..3).any(|c| corner(t, c) >= bp.len()))
+    {
+        return Err(FillError::bad_loop(
+            "hpde: the loop's triangulation names a vertex outside the loop",
+        ));
+    }
+    let mut out = Vec::with_capacity(pts.len());
+    for pr in pts {
+        let p = pr.pos;
+        let mut best: Option<(f64, usize, DVec3)> = None;
+        for (ti, t) in surface.iter().enumerate() {
+            let (a, b, c) = (bp[corner(t, 0)], bp[corner(t, 1)], bp[corner(t, 2)]);
+            let q = closest_point_on_triangle(p, a, b, c);
+            let d = (q - p).length_squared();
+            if best.is_none_or(|(bd, _, _)| d < bd) {
+                best = Some((d, ti, q));
+            }
+        }
+        let Some((_, ti, q)) = best else {
+            continue;
+        };
+        let t = &surface[ti];
+        let w = barycentric(q, bp[corner(t, 0)], bp[corner(t, 1)], bp[corner(t, 2)]);
+        let at = l[corner(t, 0)] * w.x + l[corner(t, 1)] * w.y + l[corner(t, 2)] * w.z;
+        if at.is_finite() {
+            out.push((at, if on_surface { q } else { p }));
+        }
+    }
+    Ok(OverSurface {
+        loop2d: l,
+        points: out,
+    })
+}
+
+/// The loop and the predicted points mapped over a surface ([`over_surface`]).
+#[derive(Clone, Debug)]
+pub struct OverSurface {
+    /// The loop on the circle.
+    pub loop2d: Vec<DVec2>,
+    /// Each kept point's plane position and its 3-D position.
+    pub points: Vec<(DVec2, DVec3)>,
+}
+
+/// Barycentric coordinates of `q` (a point of the triangle's plane) in `abc`; the
+/// centroid's for a degenerate triangle.
+fn barycentric(q: DVec3, a: DVec3, b: DVec3, c: DVec3) -> DVec3 {
+    let (v0, v1, v2) = (b - a, c - a, q - a);
+    let (d00, d01, d11) = (v0.dot(v0), v0.dot(v1), v1.dot(v1));
+    let (d20, d21) = (v2.dot(v0), v2.dot(v1));
+    let den = d00 * d11 - d01 * d01;
+    if !den.is_finite() || den <= 1e-12 * d00 * d11 {
+        return DVec3::splat(1.0 / 3.0);
+    }
+    let v = ((d11 * d20 - d01 * d21) / den).clamp(0.0, 1.0);
+    let w = ((d00 * d21 - d01 * d20) / den).clamp(0.0, 1.0 - v);
+    DVec3::new(1.0 - v - w, v, w)
 }
 
 fn signed_area(l: &[DVec2]) -> f64 {
@@ -329,24 +414,36 @@ pub struct Triangulated {
     pub triangles: Vec<[u32; 3]>,
 }
 
-/// Constrained Delaunay triangulation of the projected loop and predicted points,
+/// The predicted points on a projection: each one's plane position beside its 3-D one.
+pub fn project_all(proj: &Projection, pts: &[Predicted]) -> Vec<(DVec2, DVec3)> {
+    pts.iter()
+        .map(|p| (proj.project_predicted(p), p.pos))
+        .collect()
+}
+
+/// Constrained Delaunay triangulation of the plane loop `poly` (the image of `bp`,
+/// counter-clockwise and simple) and the predicted points (plane and 3-D positions),
 /// lifted to 3D.
 pub fn triangulate(
-    proj: &Projection,
+    poly: &[DVec2],
     bp: &[DVec3],
-    pts: &[Predicted],
+    pts: &[(DVec2, DVec3)],
     drop_dist: f64,
 ) -> Result<Triangulated, FillError> {
     let k = bp.len();
-    let poly = &proj.loop2d;
+    if poly.len() != k {
+        return Err(FillError::bad_loop(format!(
+            "hpde: the plane loop has {} vertices, the loop {k}",
+            poly.len()
+        )));
+    }
     let fail = |m: &str| FillError::stuck(format!("hpde: {m}"));
     // keep predicted points inside, away from the loop and from each other
     let cell = drop_dist.max(1e-300);
     let key = |q: DVec2| ((q.x / cell).floor() as i64, (q.y / cell).floor() as i64);
     let mut grid: HashMap<(i64, i64), Vec<DVec2>> = HashMap::default();
     let mut kept: Vec<(DVec2, DVec3)> = Vec::new();
-    for pr in pts {
-        let (q, p) = (proj.project_predicted(pr), pr.pos);
+    for &(q, p) in pts {
         if !q.is_finite() || !point_in_polygon(poly, q) {
             continue;
         }
@@ -474,6 +571,52 @@ pub fn triangulate(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A loop wound three quarters around a cylinder (no plane sees it as a simple
+    /// polygon) and a fan triangulation of it: each point above a surface triangle's
+    /// centroid maps to the centroid of that triangle's image on the circle, inside
+    /// the circle polygon; `on_surface` lifts it to the centroid itself.
+    #[test]
+    fn points_over_a_wound_surface_map_into_their_triangles_image() {
+        let k = 24;
+        let bp: Vec<DVec3> = (0..k)
+            .map(|i| {
+                let a = 1.5 * std::f64::consts::PI * i as f64 / (k - 1) as f64;
+                let z = if i % 2 == 0 { 0.0 } else { 0.3 };
+                DVec3::new(a.cos(), a.sin(), z)
+            })
+            .collect();
+        let surface: Vec<[u32; 3]> = (1..k as u32 - 1).map(|i| [0, i, i + 1]).collect();
+        let pts: Vec<Predicted> = surface
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| bp[i as usize]);
+                let n = (b - a).cross(c - a).normalize();
+                Predicted {
+                    pos: (a + b + c) / 3.0 + n * 1e-3,
+                    pair: (0, 1),
+                    frac: 0.5,
+                }
+            })
+            .collect();
+        let o = over_surface(&bp, &surface, &pts, false).unwrap();
+        let (l, over) = (o.loop2d, o.points);
+        assert!(not_simple(&l).is_none());
+        assert_eq!(over.len(), pts.len());
+        for ((q, p), (t, pr)) in over.iter().zip(surface.iter().zip(&pts)) {
+            let image = (l[t[0] as usize] + l[t[1] as usize] + l[t[2] as usize]) / 3.0;
+            assert!((*q - image).length() < 1e-9, "{q} against {image}");
+            assert!(point_in_polygon(&l, *q));
+            assert_eq!(*p, pr.pos);
+        }
+        let on = over_surface(&bp, &surface, &pts, true).unwrap().points;
+        for ((_, p), t) in on.iter().zip(&surface) {
+            let c = t.map(|i| bp[i as usize]);
+            assert!((*p - (c[0] + c[1] + c[2]) / 3.0).length() < 1e-9);
+        }
+        // a triangle naming a vertex outside the loop is an error, not a panic
+        assert!(over_surface(&bp, &[[0, 1, k as u32]], &pts, false).is_err());
+    }
 
     #[test]
     fn simple_and_self_crossing_polygons() {
