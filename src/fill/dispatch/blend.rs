@@ -18,7 +18,7 @@
 //! the accepted method and failed. The loop and the input are untouched.
 //! Measured in docs/measurements.md.
 
-use super::{guarded, run_method_unchecked};
+use super::{guarded, run_method_fill};
 use crate::check::Checker;
 use crate::fill::kit::{relax, Deadline, FillContext};
 use crate::geometry::bvh::{closest_on_triangles, tri_box, Bvh};
@@ -127,7 +127,7 @@ pub fn guide(mesh: &Mesh, hole: &Hole, policy: &Policy) -> Guide {
         guide: true,
         ..FillContext::new(mesh, hole, policy)
     };
-    let made = guarded(with, || run_method_unchecked(with, &ctx))
+    let made = guarded(with, || run_method_fill(with, &ctx))
         .map_err(|why| format!("{} failed: {why}", with.name()));
     (made, t0.elapsed().as_secs_f64() * 1000.0)
 }
@@ -401,7 +401,7 @@ mod tests {
             .expect("valid");
         let checker = Checker::new(&mesh);
         let ctx = FillContext::new(&mesh, &hole, &policy);
-        let own = run_method_unchecked(Method::Wavefront, &ctx).expect("the wavefront fills");
+        let own = run_method_fill(Method::Wavefront, &ctx).expect("the wavefront fills");
         assert!(!own.new_vertices.is_empty(), "the wavefront adds vertices");
         let (out, rep) = pull(&mesh, &hole, &policy, &checker, &tent(0.4), None);
         let (p, _) = out.expect("applied");

@@ -47,10 +47,12 @@ pub fn run_method_checked(
     }
 }
 
-/// Runs one method's own fill, without the dispatcher's relaxation and checks and
-/// without the self-checked methods' variants (the self-validation's candidates,
-/// [`select`]).
-pub fn run_method_unchecked(method: Method, ctx: &FillContext) -> Result<Patch, FillError> {
+/// Runs one method's `fill`: its patch without the dispatcher's relaxation and final
+/// checks (the self-validation's candidates, [`select`], and the blend's guide,
+/// [`blend`]). The methods that check their own patches (`wavefront`, `hpde`,
+/// `lssvm_poisson`) still run their variants inside it; a guide
+/// ([`FillContext::guide`]) keeps its first variant as made.
+pub fn run_method_fill(method: Method, ctx: &FillContext) -> Result<Patch, FillError> {
     match method {
         Method::Fan => fan::fill(ctx),
         Method::MinAreaFair => min_area_fair::fill(ctx),

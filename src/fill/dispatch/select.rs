@@ -23,7 +23,7 @@
 //! (a machined, piecewise-planar surface) `select.flat_method` goes first, elsewhere
 //! the list's order; it costs a walk over a few rings.
 
-use super::{guarded, run_method_unchecked};
+use super::{guarded, run_method_fill};
 use crate::fill::kit::{Deadline, FillContext};
 use crate::geometry::bvh::{closest_on_triangles, tri_box, Bvh};
 use crate::io::RawMesh;
@@ -222,7 +222,7 @@ pub fn validate(mesh: &Mesh, hole: &Hole, policy: &Policy, candidates: &[Method]
             rim_bound: false,
             guide: false,
         };
-        let run = guarded(method, || run_method_unchecked(method, &ctx));
+        let run = guarded(method, || run_method_fill(method, &ctx));
         let c = match run {
             Ok(patch) => Candidate {
                 method,
