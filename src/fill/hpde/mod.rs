@@ -125,7 +125,8 @@ use std::collections::BTreeSet;
 
 /// Fills the hole with HPDE (see the module documentation): the policy's settings
 /// first; when their patch fails the checks (after a local repair by edge flips), the
-/// variants of [`variants`] (see [`crate::fill::kit::retry`]).
+/// variants of [`variants`], then those of [`surface_variants`] and
+/// [`on_surface_variants`] (step 9; see [`crate::fill::kit::retry`]).
 pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
     fill_checked(ctx).map(|(p, _)| p)
 }
