@@ -96,7 +96,7 @@
 //!    plane variant fails, step 6 is done over the loop's minimum-area triangulation
 //!    instead: its triangles map affinely onto a circle (the loop by arc length), each
 //!    predicted point goes where its closest point on that surface lands, and the CDT
-//!    is made there ([`topology::over_surface`]); a plane sees such a hole folded, the
+//!    is made there (`topology::over_surface`); a plane sees such a hole folded, the
 //!    surface does not. Then the same without collapse and smoothing, and last the
 //!    points moved onto the surface (the smoothing alone shapes the patch). On the
 //!    bench's seeds 1-5 (nine meshes, 566 holes forced to `hpde`) this closes 14 of
@@ -164,7 +164,7 @@ pub enum Topology {
     /// The paper's: the fitted plane(s), then the other planes and the disk.
     Plane,
     /// The loop's minimum-area triangulation mapped onto a circle
-    /// ([`topology::over_surface`]).
+    /// (`topology::over_surface`).
     MinimumArea,
     /// As [`Topology::MinimumArea`], each predicted point moved to its closest point on
     /// that surface (the last resort: the smoothing alone shapes the patch).
