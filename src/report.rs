@@ -60,6 +60,10 @@ pub struct Attempt {
     pub outcome: Outcome,
     /// Why it was rejected or failed (empty when accepted).
     pub reason: String,
+    /// The variant of a self-checked method that made the patch, when not the
+    /// method's first (the policy's own settings); absent otherwise.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub variant: Option<String>,
     pub ms: f64,
 }
 

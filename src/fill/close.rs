@@ -20,6 +20,7 @@
 use super::kit::triangulate::{self, forbidden_chords, outside_normals, LoopInput};
 use super::kit::{FillContext, FillError};
 use crate::check::{CheckFailure, Checker};
+use crate::fill::kit::retry::Passed;
 use crate::geometry::measure;
 use crate::patch::Patch;
 use crate::policy::{Checks, TriangulationWeight};
@@ -36,7 +37,7 @@ pub fn relaxed_checks(policy: &Checks) -> Checks {
 
 /// Closes the hole; the patch is checked (with [`relaxed_checks`]) and returned with
 /// its quality.
-pub fn fill_checked(ctx: &FillContext) -> Result<(Patch, Option<PatchQuality>), FillError> {
+pub fn fill_checked(ctx: &FillContext) -> Result<(Patch, Option<Passed>), FillError> {
     let k = ctx.hole.len();
     if k < 3 {
         return Err(FillError::bad_loop(format!(
@@ -82,8 +83,10 @@ pub fn fill_checked(ctx: &FillContext) -> Result<(Patch, Option<PatchQuality>), 
             deadline: ctx.deadline,
         };
         if let Ok(tris) = triangulate::triangulate(&inp) {
-            if let Some((p, q)) = try_patch(tris) {
-                return Ok((p, Some(q)));
+            if let Some((p, quality)) = try_patch(tris) {
+                let variant =
+                    (weight != TriangulationWeight::Area).then_some("dihedral-area weight");
+                return Ok((p, Some(Passed { quality, variant })));
             }
         }
     }
@@ -96,8 +99,9 @@ pub fn fill_checked(ctx: &FillContext) -> Result<(Patch, Option<PatchQuality>), 
             })
         });
         if !uses_forbidden {
-            if let Some((p, q)) = try_patch(tris) {
-                return Ok((p, Some(q)));
+            if let Some((p, quality)) = try_patch(tris) {
+                let variant = Some("ear clipping");
+                return Ok((p, Some(Passed { quality, variant })));
             }
         }
     }

@@ -209,8 +209,8 @@ fn fill_all(
         .iter()
         .flatten()
         .filter_map(|p| p.accepted.as_ref())
-        .fold((0, 0), |(v, f), (_, patch, _, _)| {
-            (v + patch.new_vertices.len(), f + patch.triangles.len())
+        .fold((0, 0), |(v, f), a| {
+            (v + a.patch.new_vertices.len(), f + a.patch.triangles.len())
         });
     mesh.reserve(nv, nf);
     let mut out = Vec::with_capacity(holes.len());

@@ -168,7 +168,7 @@ fn one_round(
             let hole = Hole::new(0, mesh, lobe, policy);
             let proposal = dispatch::propose(mesh, &hole, policy, &checker);
             let methods = proposal.order;
-            let Some((m, patch, _, _)) = proposal.accepted else {
+            let Some(dispatch::Accepted { at: m, patch, .. }) = proposal.accepted else {
                 continue;
             };
             if checker

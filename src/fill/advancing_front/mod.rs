@@ -107,12 +107,12 @@ use super::kit::front::{edge_key, Entry, FrontQueue, Ring};
 use super::kit::{fair, residual, retry, FillContext, FillError, TooLarge};
 use crate::fasthash::FxSet;
 use crate::fasthash::HashMap;
+use crate::fill::kit::retry::Passed;
 use crate::geometry::grid::Grid;
 use crate::geometry::measure;
 use crate::mesh::VertexId;
 use crate::patch::Patch;
 use crate::policy::Policy;
-use crate::report::PatchQuality;
 use builder::Builder;
 use glam::DVec3;
 use intersect::Obstacles;
@@ -142,7 +142,7 @@ const SWAPS_PER_TRIANGLE: usize = 10;
 /// Fills the hole as [`fill`] does, self-checked ([`retry`], as the other methods): a
 /// patch that fails the dispatcher's checks is repaired locally, then made again by
 /// the variants of [`variants`].
-pub fn fill_checked(ctx: &FillContext) -> Result<(Patch, Option<PatchQuality>), FillError> {
+pub fn fill_checked(ctx: &FillContext) -> Result<(Patch, Option<Passed>), FillError> {
     retry::first_passing_at(ctx, &variants(ctx.policy), |_, c| fill(c))
 }
 

@@ -490,6 +490,7 @@ mod tests {
             method,
             outcome: Outcome::Rejected,
             reason: "a self-intersection".into(),
+            variant: None,
             ms: 1.0,
         };
         assert_eq!(already_failed(&policy, &[]), None);

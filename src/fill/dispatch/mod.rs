@@ -12,6 +12,7 @@ pub mod parallel;
 pub mod rim;
 pub mod select;
 
+use super::kit::retry::Passed;
 use super::kit::{relax, Deadline, FillContext, FillError};
 use super::{advancing_front, close, fan, hpde, lssvm_poisson, min_area_fair, wavefront};
 use crate::check::Checker;
@@ -35,7 +36,7 @@ pub fn run_method(method: Method, ctx: &FillContext) -> Result<Patch, FillError>
 pub fn run_method_checked(
     method: Method,
     ctx: &FillContext,
-) -> Result<(Patch, Option<PatchQuality>), FillError> {
+) -> Result<(Patch, Option<Passed>), FillError> {
     match method {
         Method::Fan => fan::fill(ctx).map(|p| (p, None)),
         Method::MinAreaFair => min_area_fair::fill_checked(ctx),
@@ -100,16 +101,30 @@ pub struct Proposal {
     pub selection: Option<Selection>,
     /// Attempts that failed or were rejected, in order.
     pub tried: Vec<Attempt>,
-    /// The accepted attempt: index in `order`, patch, quality, ms.
-    pub accepted: Option<(usize, Patch, PatchQuality, f64)>,
+    /// The accepted attempt.
+    pub accepted: Option<Accepted>,
     /// What `[blend]` did to the accepted patch (`None` when it does not apply).
     pub blend: Option<BlendReport>,
     /// Time spent, in milliseconds.
     pub ms: f64,
 }
 
+/// A patch that passed every check against the mesh it was made on.
+#[derive(Clone, Debug)]
+pub struct Accepted {
+    /// Index of its method in the proposal's `order`.
+    pub at: usize,
+    pub patch: Patch,
+    pub quality: PatchQuality,
+    /// The variant of a self-checked method that made it, when not the method's first
+    /// ([`crate::fill::kit::retry::Passed`]).
+    pub variant: Option<&'static str>,
+    /// Time spent on it, in milliseconds.
+    pub ms: f64,
+}
+
 /// One method on one hole: run it, relax the patch tangentially, check it. `Ok` holds
-/// the checked patch and its quality; `Err` the attempt that failed, and whether the
+/// the checked patch (`at` 0); `Err` the attempt that failed, and whether the
 /// method stopped its variants at a repeated loop edge (see
 /// [`FillContext::rim_bound`], which `rim_bound` sets for this method).
 fn attempt(
@@ -119,7 +134,7 @@ fn attempt(
     policy: &Policy,
     checker: &Checker,
     rim_bound: bool,
-) -> Result<(Patch, PatchQuality, f64), (Attempt, bool)> {
+) -> Result<Accepted, (Attempt, bool)> {
     let ta = Instant::now();
     let ctx = FillContext {
         mesh,
@@ -134,6 +149,14 @@ fn attempt(
         method,
         outcome,
         reason,
+        variant: None,
+        ms: ms_since(ta),
+    };
+    let accepted = |patch, quality, variant| Accepted {
+        at: 0,
+        patch,
+        quality,
+        variant,
         ms: ms_since(ta),
     };
     let result = guarded(method, || run_method_checked(method, &ctx)).and_then(|p| {
@@ -142,7 +165,7 @@ fn attempt(
     });
     let patch = match result {
         // relaxed and checked by the method itself, with this checker
-        Ok((p, Some(q))) => return Ok((p, q, ms_since(ta))),
+        Ok((p, Some(q))) => return Ok(accepted(p, q.quality, q.variant)),
         Ok((p, None)) => p,
         Err(FillError::Timeout) => {
             return Err((
@@ -169,10 +192,10 @@ fn attempt(
         relax::RELAX_STEP,
         |p| checker.check_patch(mesh, &hole.vertices, p, &policy.checks),
     ) {
-        return Ok((relaxed, q, ms_since(ta)));
+        return Ok(accepted(relaxed, q, None));
     }
     match checker.check_patch(mesh, &hole.vertices, &patch, &policy.checks) {
-        Ok(q) => Ok((patch, q, ms_since(ta))),
+        Ok(q) => Ok(accepted(patch, q, None)),
         Err(why) => Err((failed(Outcome::Rejected, why.to_string()), false)),
     }
 }
@@ -195,13 +218,26 @@ pub fn propose(mesh: &Mesh, hole: &Hole, policy: &Policy, checker: &Checker) -> 
         (propose_from(mesh, hole, policy, checker, order, 0), None)
     };
     p.selection = selection;
-    if let Some((i, patch, q, ms)) = p.accepted.take() {
-        let (patch, q, rep) = blend::blended(
-            mesh, hole, policy, checker, p.order[i], &p.tried, patch, q, guide,
+    if let Some(a) = p.accepted.take() {
+        let (patch, quality, rep) = blend::blended(
+            mesh,
+            hole,
+            policy,
+            checker,
+            p.order[a.at],
+            &p.tried,
+            a.patch,
+            a.quality,
+            guide,
         );
-        let ms = ms + rep.as_ref().map_or(0.0, |r| r.ms);
+        let ms = a.ms + rep.as_ref().map_or(0.0, |r| r.ms);
         p.blend = rep;
-        p.accepted = Some((i, patch, q, ms));
+        p.accepted = Some(Accepted {
+            patch,
+            quality,
+            ms,
+            ..a
+        });
     }
     p.ms = ms_since(t0);
     p
@@ -222,12 +258,12 @@ fn propose_from(
     if hole.len() >= 3 {
         for (i, &method) in order.iter().enumerate().skip(from) {
             match attempt(method, mesh, hole, policy, checker, rim_bound) {
-                Ok((patch, q, ms)) => {
+                Ok(a) => {
                     return Proposal {
                         order,
                         selection: None,
                         tried,
-                        accepted: Some((i, patch, q, ms)),
+                        accepted: Some(Accepted { at: i, ..a }),
                         blend: None,
                         ms: ms_since(t0),
                     }
@@ -282,16 +318,17 @@ pub fn finish_hole(
     // the proposal first, then each later method with full checks
     loop {
         let candidate = match next.take() {
-            Some(Some((i, patch, q, ms))) => {
-                from = i + 1;
-                match checker.check_against_added(mesh, &hole.vertices, &patch, &policy.checks) {
-                    Ok(()) => Some((i, patch, q, ms)),
+            Some(Some(a)) => {
+                from = a.at + 1;
+                match checker.check_against_added(mesh, &hole.vertices, &a.patch, &policy.checks) {
+                    Ok(()) => Some(a),
                     Err(why) => {
                         rep.tried.push(Attempt {
-                            method: methods[i],
+                            method: methods[a.at],
                             outcome: Outcome::Rejected,
                             reason: why.to_string(),
-                            ms,
+                            variant: a.variant.map(str::to_string),
+                            ms: a.ms,
                         });
                         // the blend was of this patch; a later one is not blended
                         blend = None;
@@ -310,10 +347,18 @@ pub fn finish_hole(
                 p.accepted
             }
         };
-        let Some((i, patch, quality, ms)) = candidate else {
+        let Some(Accepted {
+            at,
+            patch,
+            quality,
+            variant,
+            ms,
+        }) = candidate
+        else {
             continue;
         };
-        let method = methods[i];
+        let method = methods[at];
+        let variant = variant.map(str::to_string);
         match apply_patch(mesh, hole, &patch) {
             Ok(faces) => {
                 checker.commit(mesh, faces);
@@ -321,6 +366,7 @@ pub fn finish_hole(
                     method,
                     outcome: Outcome::Accepted,
                     reason: String::new(),
+                    variant,
                     ms,
                 });
                 rep.method = Some(method);
@@ -338,6 +384,7 @@ pub fn finish_hole(
                     method,
                     outcome: Outcome::Rejected,
                     reason: why.to_string(),
+                    variant,
                     ms,
                 })
             }

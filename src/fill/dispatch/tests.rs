@@ -67,7 +67,13 @@ fn a_proposal_that_meets_an_earlier_patch_fails_over_to_the_next_method() {
         order: methods.clone(),
         selection: None,
         tried: Vec::new(),
-        accepted: Some((0, tall, q, 0.0)),
+        accepted: Some(Accepted {
+            at: 0,
+            patch: tall,
+            quality: q,
+            variant: None,
+            ms: 0.0,
+        }),
         blend: None,
         ms: 0.0,
     };
@@ -166,9 +172,45 @@ fn dispatcher_accepts_hpde_patches() {
         let rep = fill_hole(&mut mesh, &hole, &policy, &mut chk);
         assert_eq!(rep.status, HoleStatus::Filled, "{:?}", rep.tried);
         assert_eq!(rep.method, Some(Method::Hpde));
+        // the paper's own settings closed these: no variant named
+        assert_eq!(rep.tried.last().map(|a| a.variant.clone()), Some(None));
         mesh.validate().unwrap();
         assert_eq!(mesh.topo.boundary_loops().len(), loops - 1);
     }
+}
+
+/// A hole that a later variant of a self-checked method closes is logged with that
+/// variant's name: HPDE on a hole wound round a cylinder, which no plane shows as a
+/// simple polygon (the disk fallback off), is closed over the minimum-area surface.
+#[test]
+fn the_log_names_the_variant_that_made_the_patch() {
+    let policy = only(Method::Hpde)
+        .edit(|s| s.hpde.disk_fallback = false)
+        .unwrap();
+    let (mut mesh, lp) = cylinder_with_hole(32, 24, 2.9, 1.5);
+    let hole = Hole::new(0, &mesh, lp, &policy);
+    let mut chk = Checker::new(&mesh);
+    let rep = fill_hole(&mut mesh, &hole, &policy, &mut chk);
+    mesh.validate().unwrap();
+    assert_eq!(rep.status, HoleStatus::Filled, "{:?}", rep.tried);
+    let last = rep.tried.last().expect("an attempt");
+    assert_eq!(last.outcome, Outcome::Accepted);
+    let variant = last.variant.as_deref().expect("a variant named");
+    assert!(variant.contains("minimum-area surface"), "{variant}");
+    let json = serde_json::to_value(&rep).unwrap();
+    assert_eq!(json["tried"][rep.tried.len() - 1]["variant"], variant);
+    // and a logged attempt without one has no such key
+    let rejected = Attempt {
+        method: Method::Hpde,
+        outcome: Outcome::Rejected,
+        reason: "a self-intersection".into(),
+        variant: None,
+        ms: 1.0,
+    };
+    assert!(serde_json::to_value(&rejected)
+        .unwrap()
+        .get("variant")
+        .is_none());
 }
 
 /// A policy that names only `wavefront` fills the sphere hole with it.

@@ -135,7 +135,7 @@ pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
 /// [`crate::fill::dispatch::run_method_checked`]).
 pub fn fill_checked(
     ctx: &FillContext,
-) -> Result<(Patch, Option<crate::report::PatchQuality>), FillError> {
+) -> Result<(Patch, Option<crate::fill::kit::retry::Passed>), FillError> {
     check_patch_size(ctx)?;
     let mut list = variants(ctx.policy);
     let planes = list.len();

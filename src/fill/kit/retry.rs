@@ -30,6 +30,16 @@ use crate::patch::Patch;
 use crate::policy::Policy;
 use crate::report::PatchQuality;
 
+/// How a self-checked method's patch passed the checks (see [`first_passing_at`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Passed {
+    /// The quality of the checks it passed.
+    pub quality: PatchQuality,
+    /// The variant that made it, when that is not the first (the policy as given):
+    /// the repair log names it.
+    pub variant: Option<&'static str>,
+}
+
 /// Runs `run` under each policy of `variants` (first = the policy as given) and returns
 /// the first patch that passes the checks, else a failure listing why each variant
 /// failed.
@@ -52,7 +62,7 @@ pub fn first_passing_at(
     ctx: &FillContext,
     variants: &[(&'static str, Policy)],
     run: impl Fn(usize, &FillContext) -> Result<Patch, FillError>,
-) -> Result<(Patch, Option<PatchQuality>), FillError> {
+) -> Result<(Patch, Option<Passed>), FillError> {
     first_passing_unless(ctx, variants, |_| true, run)
 }
 
@@ -65,7 +75,7 @@ pub fn first_passing_unless(
     variants: &[(&'static str, Policy)],
     settings_only: impl Fn(usize) -> bool,
     run: impl Fn(usize, &FillContext) -> Result<Patch, FillError>,
-) -> Result<(Patch, Option<PatchQuality>), FillError> {
+) -> Result<(Patch, Option<Passed>), FillError> {
     // the dispatcher's checker when there is one; else one built on first use
     let mut own: Option<Checker> = None;
     let mut reasons: Vec<VariantFailure> = Vec::new();
@@ -104,6 +114,12 @@ pub fn first_passing_unless(
             error = made.as_ref().err().map(|e| e.to_string()),
             "variant run"
         );
+        let passed = |quality| {
+            Some(Passed {
+                quality,
+                variant: (at > 0).then_some(*name),
+            })
+        };
         match made {
             Ok(p) => {
                 if variants.len() == 1 {
@@ -128,7 +144,7 @@ pub fn first_passing_unless(
                 // relaxed if that passes (parts held where it fails), else as it is
                 if let Some((relaxed, q)) = relax(&p) {
                     trace_settled(ctx, name, t, true);
-                    return Ok((relaxed, Some(q)));
+                    return Ok((relaxed, passed(q)));
                 }
                 // as made, with every failure recorded: the repairs below re-test
                 // only the triangles they change
@@ -148,7 +164,7 @@ pub fn first_passing_unless(
                 debug_assert_eq!(result, check(&p), "incremental and whole checks disagree");
                 trace_settled(ctx, name, t, result.is_ok());
                 let e = match result {
-                    Ok(q) => return Ok((p, Some(q))),
+                    Ok(q) => return Ok((p, passed(q))),
                     Err(e) => e,
                 };
                 let repaired = state.and_then(|s| {
@@ -158,9 +174,9 @@ pub fn first_passing_unless(
                 if let Some((r, known)) = repaired {
                     // the repair passed the checks: relaxed if that passes too
                     if let Some((relaxed, q)) = relax(&r) {
-                        return Ok((relaxed, Some(q)));
+                        return Ok((relaxed, passed(q)));
                     }
-                    return Ok((r, Some(known)));
+                    return Ok((r, passed(known)));
                 }
                 if ctx.guide {
                     // a surface to pull toward needs no checks (see FillContext::guide)
@@ -613,11 +629,37 @@ mod tests {
         assert_eq!(got, good);
         assert_eq!(
             q,
-            Some(
-                checker
+            Some(Passed {
+                quality: checker
                     .check_patch(&mesh, &hole.vertices, &good, &policy.checks)
-                    .unwrap()
-            )
+                    .unwrap(),
+                variant: None,
+            })
+        );
+    }
+
+    /// The variant that made a passing patch is named when it is not the first.
+    #[test]
+    fn a_later_variant_that_passes_is_named() {
+        let (mesh, lp) = holed_grid();
+        let policy = Policy::default();
+        let hole = Hole::new(0, &mesh, lp, &policy);
+        let ctx = FillContext::new(&mesh, &hole, &policy);
+        let variants = [("policy", policy.clone()), ("again", policy.clone())];
+        let run = |at: usize, c: &FillContext| {
+            if at == 0 {
+                Err(FillError::stuck("the first variant fails"))
+            } else {
+                kit_fill(c)
+            }
+        };
+        let (_, passed) = first_passing_at(&ctx, &variants, run).unwrap();
+        assert_eq!(passed.map(|p| p.variant), Some(Some("again")));
+        let (_, passed) = first_passing_at(&ctx, &variants, |_, c| kit_fill(c)).unwrap();
+        assert_eq!(
+            passed.map(|p| p.variant),
+            Some(None),
+            "the first is not named"
         );
     }
 

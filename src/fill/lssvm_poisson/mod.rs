@@ -143,7 +143,7 @@ pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
 /// [`crate::fill::dispatch::run_method_checked`]).
 pub fn fill_checked(
     ctx: &FillContext,
-) -> Result<(Patch, Option<crate::report::PatchQuality>), FillError> {
+) -> Result<(Patch, Option<crate::fill::kit::retry::Passed>), FillError> {
     check_patch_size(ctx)?;
     let p = ctx.policy.clone();
     // a valid policy stays valid (gamma / 4 stays positive)

@@ -48,11 +48,11 @@ pub mod graded;
 use super::kit::triangulate::{forbidden_chords, outside_normals};
 use super::kit::{fair, refine, retry, triangulate, FillContext, FillError};
 use crate::fasthash::HashSet;
+use crate::fill::kit::retry::Passed;
 use crate::geometry::measure;
 use crate::mesh::{Mesh, VertexId};
 use crate::patch::Patch;
 use crate::policy::{Policy, Search, TriangulationWeight, Weights};
-use crate::report::PatchQuality;
 use glam::DVec3;
 
 /// Scale of each loop vertex: mean length of its mesh edges that are not hole-boundary
@@ -259,11 +259,11 @@ const RELAX_FAIRED: usize = 3;
 /// the closer one on 77 % of the large holes where they differ. Ours differ less (the
 /// relaxation and refairing re-mesh the patch) and the larger is the closer on 23 of
 /// 36: no gain measured (docs/measurements.md), so it is an option, off by default.
-pub fn fill_checked(ctx: &FillContext) -> Result<(Patch, Option<PatchQuality>), FillError> {
+pub fn fill_checked(ctx: &FillContext) -> Result<(Patch, Option<Passed>), FillError> {
     if ctx.policy.refine.search != Search::Both {
         return retry::first_passing_at(ctx, &variants(ctx.policy), |_, c| fill(c));
     }
-    let made = |search: Search| -> Result<(Patch, Option<PatchQuality>), FillError> {
+    let made = |search: Search| -> Result<(Patch, Option<Passed>), FillError> {
         let Ok(policy) = ctx.policy.edit(|s| s.refine.search = search) else {
             return Err(FillError::stuck("the policy does not take the search"));
         };

@@ -104,12 +104,12 @@ mod tests;
 use super::kit::front::{edge_key, Entry, FrontQueue, Ring};
 use super::kit::{check_patch_size, residual, retry, Cause, FillContext, FillError, TooLarge};
 use crate::fasthash::{HashMap, HashSet};
+use crate::fill::kit::retry::Passed;
 use crate::geometry::grid::Grid;
 use crate::geometry::measure;
 use crate::geometry::predicates::{ccw2d, overlap2d, overlap2d_ccw, p2, seg_crosses_tri, P2};
 use crate::patch::Patch;
 use crate::policy::{Policy, Settings, Wavefront, WavefrontPlacement};
-use crate::report::PatchQuality;
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -150,7 +150,7 @@ pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
 
 /// [`fill`], with the quality of the checks the patch passed (see
 /// [`crate::fill::dispatch::run_method_checked`]).
-pub fn fill_checked(ctx: &FillContext) -> Result<(Patch, Option<PatchQuality>), FillError> {
+pub fn fill_checked(ctx: &FillContext) -> Result<(Patch, Option<Passed>), FillError> {
     // a hole whose patch would pass `limits.max_patch_triangles` is left to the next
     // method at once (the front's cost grows faster than its triangle count: a round
     // hole of 1,000 vertices took 20 s): the loop's projected area over the area of an
