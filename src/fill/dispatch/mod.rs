@@ -124,8 +124,8 @@ pub struct Accepted {
 }
 
 /// One method on one hole: run it, relax the patch tangentially, check it. `Ok` holds
-/// the checked patch (`at` 0); `Err` the attempt that failed, and whether the
-/// method stopped its variants at a repeated loop edge (see
+/// the checked patch (its `at` is 0: the caller sets it); `Err` the attempt that
+/// failed, and whether the method stopped its variants at a repeated loop edge (see
 /// [`FillContext::rim_bound`], which `rim_bound` sets for this method).
 fn attempt(
     method: Method,
