@@ -297,7 +297,7 @@ pub fn fill_with(ctx: &FillContext, topology: Topology) -> Result<Patch, FillErr
         Topology::MinimumArea | Topology::OnMinimumArea => {
             let surface = minimum_area_surface(ctx, &bp)?;
             let on = topology == Topology::OnMinimumArea;
-            let o = topology::over_surface(&bp, &surface, &predicted, on)?;
+            let o = topology::over_surface(&bp, &surface, &predicted, on, &ctx.deadline)?;
             (o.loop2d, o.points)
         }
     };

@@ -3,7 +3,7 @@
 
 use super::predict::{fit_plane, Predicted, Segmentation};
 use crate::fasthash::HashMap;
-use crate::fill::kit::FillError;
+use crate::fill::kit::{Deadline, FillError};
 use crate::geometry::measure::{closest_point_on_triangle, newell_normal, point_in_polygon};
 use crate::geometry::predicates::{self, orient2, p2, P2};
 use glam::{DVec2, DVec3};
@@ -234,12 +234,14 @@ fn circle(bp: &[DVec3]) -> Vec<DVec2> {
 /// the convex circle polygon, so the map is one-to-one, and points near each other on
 /// the surface stay near each other in the plane, however the loop winds in space.
 /// With `on_surface`, each point is lifted to its closest point on the surface instead
-/// of its predicted position.
+/// of its predicted position. The search is points x triangles, so `deadline` is
+/// checked as it goes.
 pub fn over_surface(
     bp: &[DVec3],
     surface: &[[u32; 3]],
     pts: &[Predicted],
     on_surface: bool,
+    deadline: &Deadline,
 ) -> Result<OverSurface, FillError> {
     let l = circle(bp);
     if let Some(why) = not_simple(&l) {
@@ -257,7 +259,10 @@ pub fn over_surface(
         ));
     }
     let mut out = Vec::with_capacity(pts.len());
-    for pr in pts {
+    for (i, pr) in pts.iter().enumerate() {
+        if i % 256 == 255 {
+            deadline.check()?;
+        }
         let p = pr.pos;
         let mut best: Option<(f64, usize, DVec3)> = None;
         for (ti, t) in surface.iter().enumerate() {
@@ -599,7 +604,7 @@ mod tests {
                 }
             })
             .collect();
-        let o = over_surface(&bp, &surface, &pts, false).unwrap();
+        let o = over_surface(&bp, &surface, &pts, false, &Deadline::none()).unwrap();
         let (l, over) = (o.loop2d, o.points);
         assert!(not_simple(&l).is_none());
         assert_eq!(over.len(), pts.len());
@@ -609,13 +614,23 @@ mod tests {
             assert!(point_in_polygon(&l, *q));
             assert_eq!(*p, pr.pos);
         }
-        let on = over_surface(&bp, &surface, &pts, true).unwrap().points;
+        let on = over_surface(&bp, &surface, &pts, true, &Deadline::none())
+            .unwrap()
+            .points;
         for ((_, p), t) in on.iter().zip(&surface) {
             let c = t.map(|i| bp[i as usize]);
             assert!((*p - (c[0] + c[1] + c[2]) / 3.0).length() < 1e-9);
         }
         // a triangle naming a vertex outside the loop is an error, not a panic
-        assert!(over_surface(&bp, &[[0, 1, k as u32]], &pts, false).is_err());
+        assert!(over_surface(&bp, &[[0, 1, k as u32]], &pts, false, &Deadline::none()).is_err());
+        // a spent deadline stops the search (checked every 256 points)
+        let many: Vec<Predicted> = pts.iter().cycle().take(300).copied().collect();
+        let spent = Deadline(Some(std::time::Instant::now()));
+        assert!(matches!(
+            over_surface(&bp, &surface, &many, false, &spent),
+            Err(FillError::Timeout)
+        ));
+        assert!(over_surface(&bp, &surface, &many, false, &Deadline::none()).is_ok());
     }
 
     #[test]
