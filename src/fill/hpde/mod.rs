@@ -143,32 +143,43 @@ pub fn fill_checked(
     let surfaces = over.len();
     list.extend(over);
     list.extend(on_surface_variants(ctx.policy));
+    // the surface variants change no setting the triangulation reads: made once
+    let surface = std::cell::OnceCell::new();
     retry::first_passing_unless(
         ctx,
         &list,
         |at| at < planes,
         |at, c| {
-            let topology = match at.checked_sub(planes) {
-                None => Topology::Plane,
-                Some(i) if i < surfaces => Topology::MinimumArea,
-                Some(_) => Topology::OnMinimumArea,
+            let Some(i) = at.checked_sub(planes) else {
+                return fill_with(c, Topology::Plane);
             };
-            fill_with(c, topology)
+            let tris = surface
+                .get_or_init(|| minimum_area_surface(c, &c.boundary_positions()))
+                .as_ref()
+                .map_err(Clone::clone)?;
+            fill_with(
+                c,
+                if i < surfaces {
+                    Topology::MinimumArea(tris)
+                } else {
+                    Topology::OnMinimumArea(tris)
+                },
+            )
         },
     )
 }
 
 /// Where step 6 triangulates the loop and the predicted points.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Topology {
+pub enum Topology<'a> {
     /// The paper's: the fitted plane(s), then the other planes and the disk.
     Plane,
-    /// The loop's minimum-area triangulation mapped onto a circle
-    /// (`topology::over_surface`).
-    MinimumArea,
+    /// Over the loop's minimum-area triangulation (loop indices, see
+    /// [`minimum_area_surface`]) mapped onto a circle (`topology::over_surface`).
+    MinimumArea(&'a [[u32; 3]]),
     /// As [`Topology::MinimumArea`], each predicted point moved to its closest point on
     /// that surface (the last resort: the smoothing alone shapes the patch).
-    OnMinimumArea,
+    OnMinimumArea(&'a [[u32; 3]]),
 }
 
 /// The variants run over the minimum-area surface ([`Topology::MinimumArea`]) when
@@ -239,7 +250,7 @@ pub fn fill_once(ctx: &FillContext) -> Result<Patch, FillError> {
 }
 
 /// One HPDE run with the context's policy and step 6 done by `topology`.
-pub fn fill_with(ctx: &FillContext, topology: Topology) -> Result<Patch, FillError> {
+pub fn fill_with(ctx: &FillContext, topology: Topology<'_>) -> Result<Patch, FillError> {
     let opts = &ctx.policy.hpde;
     let k = ctx.hole.len();
     if k < 3 {
@@ -294,10 +305,9 @@ pub fn fill_with(ctx: &FillContext, topology: Topology) -> Result<Patch, FillErr
             let points = topology::project_all(&proj, &predicted);
             (proj.loop2d, points)
         }
-        Topology::MinimumArea | Topology::OnMinimumArea => {
-            let surface = minimum_area_surface(ctx, &bp)?;
-            let on = topology == Topology::OnMinimumArea;
-            let o = topology::over_surface(&bp, &surface, &predicted, on, &ctx.deadline)?;
+        Topology::MinimumArea(surface) | Topology::OnMinimumArea(surface) => {
+            let on = matches!(topology, Topology::OnMinimumArea(_));
+            let o = topology::over_surface(&bp, surface, &predicted, on, &ctx.deadline)?;
             (o.loop2d, o.points)
         }
     };
@@ -322,19 +332,16 @@ pub fn fill_with(ctx: &FillContext, topology: Topology) -> Result<Patch, FillErr
 
 /// The loop's minimum-area triangulation (the kit's, with the policy's weight and
 /// search; no existing mesh edge as a chord).
-fn minimum_area_surface(ctx: &FillContext, bp: &[DVec3]) -> Result<Vec<[u32; 3]>, FillError> {
+pub fn minimum_area_surface(ctx: &FillContext, bp: &[DVec3]) -> Result<Vec<[u32; 3]>, FillError> {
     let forbidden = triangulate::forbidden_chords(ctx.mesh, &ctx.hole.vertices);
     let outside = triangulate::outside_normals(ctx.mesh, &ctx.hole.vertices);
-    triangulate::triangulate(&triangulate::LoopInput {
-        pts: bp,
-        forbidden: &forbidden,
-        outside_normals: &outside,
-        weight: ctx.policy.refine.weight,
-        min_angle: ctx.policy.checks.min_angle_deg.max(0.0).to_radians(),
-        restricted_above: ctx.policy.refine.restricted_search_above,
-        delaunay: ctx.policy.refine.delaunay_first(),
-        deadline: ctx.deadline,
-    })
+    triangulate::triangulate(&triangulate::LoopInput::with_policy(
+        bp,
+        &forbidden,
+        &outside,
+        ctx.policy,
+        ctx.deadline,
+    ))
 }
 
 /// Mean length of the edges of the faces touching the loop (the paper's `EdgeLen`).

@@ -36,6 +36,16 @@ fn height_grid(
 
 // ----- running and checking ---------------------------------------------------------
 
+/// The largest `|r - 1|` of the patch's new vertices, `r` their distance from the z
+/// axis (the unit cylinder's oracle).
+fn max_radial_error(patch: &Patch) -> f64 {
+    patch
+        .new_vertices
+        .iter()
+        .map(|p| (p.truncate().length() - 1.0).abs())
+        .fold(0.0, f64::max)
+}
+
 fn run(mesh: &Mesh, lp: &[VertexId], policy: &Policy) -> (Hole, Result<Patch, FillError>) {
     crate::fill::kit::run_on(mesh, lp.to_vec(), policy, fill)
 }
@@ -139,11 +149,7 @@ fn cylinder_hole() {
     let (hole, r) = run(&mesh, &lp, &Policy::default());
     let patch = r.unwrap();
     let q = validate(&mesh, &hole, &patch);
-    let err = patch
-        .new_vertices
-        .iter()
-        .map(|p| (p.truncate().length() - 1.0).abs())
-        .fold(0.0, f64::max);
+    let err = max_radial_error(&patch);
     report("cylinder", lp.len(), &patch, q, err);
     assert!(!patch.new_vertices.is_empty());
     assert!(err < 0.02, "max |r - 1| = {err}");
@@ -346,11 +352,7 @@ fn a_hole_no_plane_sees_closes_over_its_minimum_area_surface() {
     crate::check::Checker::new(&mesh)
         .check_patch(&mesh, &hole.vertices, &patch, &policy.checks)
         .unwrap();
-    let err = patch
-        .new_vertices
-        .iter()
-        .map(|p| (p.truncate().length() - 1.0).abs())
-        .fold(0.0, f64::max);
+    let err = max_radial_error(&patch);
     report("cylinder, wound", lp.len(), &patch, q, err);
     assert!(!patch.new_vertices.is_empty());
     assert!(err < 0.05, "max |r - 1| = {err}");

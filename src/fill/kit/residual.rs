@@ -82,16 +82,13 @@ pub fn close_keeping_unfaired(
             "the residual front has a non-finite coordinate",
         ));
     }
-    let input = triangulate::LoopInput {
-        pts: r.ring,
-        forbidden: r.forbidden,
-        outside_normals: r.outside_normals,
-        weight: policy.refine.weight,
-        min_angle: policy.checks.min_angle_deg.max(0.0).to_radians(),
-        restricted_above: policy.refine.restricted_search_above,
-        delaunay: policy.refine.delaunay_first(),
-        deadline: *deadline,
-    };
+    let input = triangulate::LoopInput::with_policy(
+        r.ring,
+        r.forbidden,
+        r.outside_normals,
+        policy,
+        *deadline,
+    );
     let tris = triangulate::triangulate(&input)?;
     let scale = vec![r.edge_length; n];
     let mut rf = Refiner::new(r.ring.to_vec(), scale, tris, r.forbidden);

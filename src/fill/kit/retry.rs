@@ -419,16 +419,13 @@ fn repair_by_retriangulation(
         }
         let pts: Vec<glam::DVec3> = ring.iter().map(|&v| pos_of(patch, v)).collect();
         let outside_normals = vec![None; n];
-        let input = triangulate::LoopInput {
-            pts: &pts,
-            forbidden: &forbidden,
-            outside_normals: &outside_normals,
-            weight: ctx.policy.refine.weight,
-            min_angle: ctx.policy.checks.min_angle_deg.max(0.0).to_radians(),
-            restricted_above: ctx.policy.refine.restricted_search_above,
-            delaunay: ctx.policy.refine.delaunay_first(),
-            deadline: ctx.deadline,
-        };
+        let input = triangulate::LoopInput::with_policy(
+            &pts,
+            &forbidden,
+            &outside_normals,
+            ctx.policy,
+            ctx.deadline,
+        );
         let Ok(fill) = triangulate::triangulate(&input) else {
             continue;
         };
@@ -507,16 +504,13 @@ mod tests {
         let k = pts.len();
         let forbidden = triangulate::forbidden_chords(ctx.mesh, &ctx.hole.vertices);
         let outside = triangulate::outside_normals(ctx.mesh, &ctx.hole.vertices);
-        let tris = triangulate::triangulate(&triangulate::LoopInput {
-            pts: &pts,
-            forbidden: &forbidden,
-            outside_normals: &outside,
-            weight: ctx.policy.refine.weight,
-            min_angle: ctx.policy.checks.min_angle_deg.to_radians(),
-            restricted_above: ctx.policy.refine.restricted_search_above,
-            delaunay: ctx.policy.refine.delaunay_first(),
-            deadline: ctx.deadline,
-        })?;
+        let tris = triangulate::triangulate(&triangulate::LoopInput::with_policy(
+            &pts,
+            &forbidden,
+            &outside,
+            ctx.policy,
+            ctx.deadline,
+        ))?;
         let scale = vec![ctx.hole.mean_edge_length; k];
         let mut r = refine::Refiner::new(pts, scale, tris, &forbidden);
         r.refine(ctx.policy.refine.density, &ctx.deadline)?;

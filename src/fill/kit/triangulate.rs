@@ -34,7 +34,7 @@ use super::{Deadline, FillError};
 use crate::fasthash::{HashMap, HashSet};
 use crate::geometry::{delaunay3, measure};
 use crate::mesh::{Mesh, VertexId};
-use crate::policy::TriangulationWeight;
+use crate::policy::{Policy, TriangulationWeight};
 use glam::DVec3;
 use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
 
@@ -97,7 +97,28 @@ pub struct LoopInput<'a> {
     pub deadline: Deadline,
 }
 
-impl LoopInput<'_> {
+impl<'a> LoopInput<'a> {
+    /// The input as the policy asks for it: its triangulation weight, the checks'
+    /// smallest angle, its search settings and the hole's deadline.
+    pub fn with_policy(
+        pts: &'a [DVec3],
+        forbidden: &'a HashSet<(u32, u32)>,
+        outside_normals: &'a [Option<DVec3>],
+        policy: &Policy,
+        deadline: Deadline,
+    ) -> LoopInput<'a> {
+        LoopInput {
+            pts,
+            forbidden,
+            outside_normals,
+            weight: policy.refine.weight,
+            min_angle: policy.checks.min_angle_deg.max(0.0).to_radians(),
+            restricted_above: policy.refine.restricted_search_above,
+            delaunay: policy.refine.delaunay_first(),
+            deadline,
+        }
+    }
+
     fn k(&self) -> usize {
         self.pts.len()
     }

@@ -346,16 +346,8 @@ pub fn fill(ctx: &FillContext) -> Result<Patch, FillError> {
     if let Some(p) = fill_graded(ctx, &pts, &scale, &forbidden)? {
         return Ok(p);
     }
-    let input = triangulate::LoopInput {
-        pts: &pts,
-        forbidden: &forbidden,
-        outside_normals: &outside,
-        weight: ctx.policy.refine.weight,
-        min_angle: ctx.policy.checks.min_angle_deg.max(0.0).to_radians(),
-        restricted_above: ctx.policy.refine.restricted_search_above,
-        delaunay: ctx.policy.refine.delaunay_first(),
-        deadline: ctx.deadline,
-    };
+    let input =
+        triangulate::LoopInput::with_policy(&pts, &forbidden, &outside, ctx.policy, ctx.deadline);
     let t0 = std::time::Instant::now();
     let tris = triangulate::triangulate(&input)?;
     let t_tri = t0.elapsed();
