@@ -4,7 +4,7 @@
 use crate::io::attrs::AttributesReport;
 use crate::io::Format;
 use crate::mesh::BuildReport;
-use crate::policy::{BlendKeep, Method, Policy};
+use crate::policy::{BlendKeep, BlendSurface, Method, Policy};
 use serde::Serialize;
 
 /// Size class of a hole.
@@ -163,9 +163,16 @@ pub struct HoleReport {
 /// What `[blend]` did to one hole's patch.
 #[derive(Clone, Debug, Serialize, PartialEq)]
 pub struct BlendReport {
-    /// The method whose surface the patch was pulled toward.
-    pub with: Method,
+    /// What the patch was pulled toward (`blend.surface`).
+    pub surface: BlendSurface,
+    /// The method whose patch it was pulled toward, with `surface = "with"`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub with: Option<Method>,
+    /// The weight used: the class's, or `blend.weight_flat` where the rim reads flat.
     pub weight: f64,
+    /// The share of the rim's edges that are flat, where `blend.weight_flat` is set.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub flat_share: Option<f64>,
     /// Whether the pulled patch passed the checks and replaced the accepted one.
     pub applied: bool,
     /// Whose triangles the applied patch has (`blend.keep`, or `accepted` where

@@ -29,7 +29,8 @@ fn sphere_holes_are_closed_on_the_sphere_and_input_is_bit_exact() {
     // and 3 % (measured 10 % and 1.4 %)
     sphere_case(None, 0.05, 0.02);
     sphere_case(Some("default"), 0.12, 0.03);
-    // the shipped profile with min_area_fair first: the thin-plate bounds
+    // the shipped profile: the wavefront's patch pulled 0.9 of the way to its own thin
+    // plate, within the thin-plate bounds
     sphere_case(Some("fidelity"), 0.05, 0.02);
 }
 
@@ -114,37 +115,22 @@ fn sphere_case(policy: Option<&str>, max_bound: f64, mean_bound: f64) {
             .iter()
             .any(|a| a["outcome"] == "accepted"));
         assert!(h["quality"]["q_good_share"].as_f64().unwrap() > 0.0);
-        if policy == Some("fidelity") && h["class"] != "small" {
-            assert_eq!(h["method"], "min_area_fair", "{h}");
-        }
         if policy == Some("fidelity") {
-            // the rim rule reads every middle and large hole: a sphere is nowhere flat
+            assert!(h.get("selection").is_none(), "mode first: {h}");
             if h["class"] == "small" {
-                assert!(h.get("selection").is_none(), "{h}");
+                assert!(h.get("blend").is_none(), "{h}");
             } else {
-                let sel = &h["selection"];
-                assert_eq!(sel["mode"], "rim", "{h}");
-                assert_eq!(sel["rim"]["flat_share"], 0.0, "{h}");
-                assert!(sel["winner"].is_null(), "{h}");
-                // and the thin plate's patch is pulled halfway to the wavefront's
+                // the accepted patch pulled toward its own faired surface; a sphere's
+                // rim is nowhere flat, so the class's weight
                 let b = &h["blend"];
-                assert_eq!(b["with"], "wavefront", "{h}");
-                assert_eq!(b["weight"], 0.5, "{h}");
+                assert_eq!(b["surface"], "faired", "{h}");
+                assert!(b.get("with").is_none(), "{h}");
+                assert_eq!(b["weight"], 0.9, "{h}");
+                assert_eq!(b["flat_share"], 0.0, "{h}");
                 assert_eq!(b["applied"], true, "{h}");
+                assert_eq!(b["kept"], "accepted", "{h}");
+                assert_eq!(b["reason"], "", "{h}");
                 assert_eq!(b["moved_vertices"], h["added_vertices"], "{h}");
-                // the wavefront's triangles on the blended surface, unless they failed
-                // the checks (then the reason says so)
-                match b["kept"].as_str() {
-                    Some("with") => assert_eq!(b["reason"], "", "{h}"),
-                    Some("accepted") => assert!(
-                        b["reason"]
-                            .as_str()
-                            .unwrap()
-                            .contains("wavefront's triangles"),
-                        "{h}"
-                    ),
-                    _ => panic!("blend.kept: {h}"),
-                }
                 let shift = b["mean_shift"].as_f64().unwrap();
                 assert!(shift > 0.0 && shift < 1.0, "{h}");
             }
@@ -245,10 +231,11 @@ fn self_validation_scores_both_candidates_and_fills_with_the_winner() {
 }
 
 /// The shipped fidelity profile on a flat rim (a plate with a round hole: a machined
-/// face) puts the wavefront first (`select.mode = "rim"`), and the patch stays in the
-/// plate's plane; the plate's outer border is skipped as a border.
+/// face): the rim reads flat, so the wavefront's patch is pulled toward its thin plate
+/// with `blend.weight_flat`, and it stays in the plate's plane; the plate's outer
+/// border is skipped as a border.
 #[test]
-fn fidelity_profile_puts_the_wavefront_first_on_a_flat_rim() {
+fn fidelity_profile_takes_the_flat_weight_on_a_flat_rim() {
     let dir = tempdir();
     let plate = grid(24, 24, 1.0, -12.0, -12.0, |_, _| 0.0);
     let (s, gt) = cut(&plate, [0.3, -0.2, 0.0], 5.0);
@@ -296,11 +283,12 @@ fn fidelity_profile_puts_the_wavefront_first_on_a_flat_rim() {
     assert_ne!(h["class"], "small", "{h}");
     assert_eq!(h["method"], "wavefront", "{h}");
     assert_eq!(h["tried"][0]["method"], "wavefront", "{h}");
-    let sel = &h["selection"];
-    assert_eq!(sel["mode"], "rim", "{h}");
-    assert_eq!(sel["winner"], "wavefront", "{h}");
-    assert_eq!(sel["rim"]["flat_share"], 1.0, "{h}");
-    assert!(sel["rim"]["edges"].as_u64().unwrap() > 50, "{h}");
+    assert!(h.get("selection").is_none(), "{h}");
+    let b = &h["blend"];
+    assert_eq!(b["surface"], "faired", "{h}");
+    assert_eq!(b["flat_share"], 1.0, "{h}");
+    assert_eq!(b["weight"], 0.3, "{h}");
+    assert_eq!(b["applied"], true, "{h}");
     // the border is skipped, not filled
     assert!(holes.iter().any(|h| h["status"] == "skipped"), "{holes:?}");
 }

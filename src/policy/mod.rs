@@ -31,7 +31,7 @@ mod validate;
 mod tests;
 
 pub use method::{Method, METHODS};
-pub use read::{did_you_mean, edit_distance, SECTIONS, TOP_LEVEL_KEYS};
+pub use read::{did_you_mean, edit_distance, OPTIONAL_KEYS, SECTIONS, TOP_LEVEL_KEYS};
 pub use sections::*;
 pub use validate::Invalid;
 

@@ -14,9 +14,13 @@ use toml::Spanned;
 /// Keys outside any section.
 pub const TOP_LEVEL_KEYS: &[&str] = &["seed"];
 
+/// The keys of [`SECTIONS`] that may be left out, each with a value it takes (the
+/// shipped `config/policy.toml` sets every other key, and shows these in a comment).
+pub const OPTIONAL_KEYS: &[(&str, &str, &str)] = &[("blend", "weight_flat", "0.3")];
+
 /// Every section and its keys, in the order of `config/policy.toml`. This is the one
 /// list behind unknown-key errors and their suggestions; a unit test checks that the
-/// default file sets every key listed here.
+/// default file sets every key listed here but the [`OPTIONAL_KEYS`].
 pub const SECTIONS: &[(&str, &[&str])] = &[
     (
         "dispatch",
@@ -34,7 +38,17 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
             "flat_method",
         ],
     ),
-    ("blend", &["weight_middle", "weight_large", "with", "keep"]),
+    (
+        "blend",
+        &[
+            "weight_middle",
+            "weight_large",
+            "weight_flat",
+            "surface",
+            "with",
+            "keep",
+        ],
+    ),
     (
         "border",
         &[
@@ -377,6 +391,8 @@ impl Reader<'_> {
             }
             ("blend", "weight_middle") => p.blend.weight_middle = self.float(key, v)?,
             ("blend", "weight_large") => p.blend.weight_large = self.float(key, v)?,
+            ("blend", "weight_flat") => p.blend.weight_flat = Some(self.float(key, v)?),
+            ("blend", "surface") => p.blend.surface = self.named(key, v)?,
             ("blend", "with") => p.blend.with = self.name_of::<Method>(key, v, "method")?,
             ("blend", "keep") => p.blend.keep = self.named(key, v)?,
             ("rim", "trim") => p.rim.trim = self.boolean(key, v)?,
@@ -619,10 +635,15 @@ mod tests {
         // A key listed in SECTIONS but missing from `Reader::set` would be reported unknown.
         for (section, keys) in SECTIONS {
             for key in *keys {
-                let root = DeTable::parse(DEFAULT_POLICY_TOML).unwrap();
+                let optional = OPTIONAL_KEYS
+                    .iter()
+                    .find(|(s, k, _)| s == section && k == key)
+                    .map(|(_, _, v)| format!("[{section}]\n{key} = {v}\n"));
+                let text = optional.as_deref().unwrap_or(DEFAULT_POLICY_TOML);
+                let root = DeTable::parse(text).unwrap();
                 let v = &root.get_ref()[*section].get_ref()[*key];
                 let r = Reader {
-                    text: DEFAULT_POLICY_TOML,
+                    text,
                     file: Path::new("x"),
                     lines: BTreeMap::new(),
                 };

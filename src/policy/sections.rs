@@ -93,21 +93,42 @@ impl Default for Select {
     }
 }
 
-/// The accepted patch pulled toward a second method's surface (`[blend]`).
+/// The accepted patch pulled toward a second surface (`[blend]`).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct Blend {
     /// How far each new vertex of a middle hole's accepted patch moves toward the
-    /// closest point of `with`'s patch: 0 off, 1 onto it.
+    /// second surface: 0 off, 1 onto it.
     pub weight_middle: f64,
     /// The same for a large hole.
     pub weight_large: f64,
-    /// The second method, run on the same hole (not `fan` or `close`). A patch made by
-    /// this method itself is kept as it is.
+    /// The weight, in place of the class's, for a middle or large hole whose rim reads
+    /// flat (the `select` rim rule: `select.flat_share` of the edges within
+    /// `select.rings` rings bend less than `select.flat_angle_deg`); absent: the
+    /// class's weight. Blending stays off where the class's weight is 0.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub weight_flat: Option<f64>,
+    /// The second surface: `with`'s own patch of the hole, or the accepted patch faired.
+    pub surface: BlendSurface,
+    /// The second method, run on the same hole (not `fan` or `close`), with
+    /// `surface = "with"`. A patch made by this method itself is kept as it is.
     pub with: Method,
-    /// Whose triangles the blended patch has: the surface is the same (`weight` of the
-    /// way from the accepted patch to `with`'s), the triangles are either's.
+    /// Whose triangles the blended patch has, with `surface = "with"`: the surface is
+    /// the same (`weight` of the way from the accepted patch to `with`'s), the
+    /// triangles are either's.
     pub keep: BlendKeep,
+}
+
+/// What an accepted patch is pulled toward (`blend.surface`).
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum BlendSurface {
+    /// `blend.with`'s own patch of the hole (its closest points).
+    With,
+    /// The accepted patch itself with its new vertices faired (`Δ^c x = 0` with the
+    /// `[fair]` keys, the loop and the outer rings fixed) on its own triangles: each
+    /// new vertex moves toward its own faired position, and the triangles are kept.
+    Faired,
 }
 
 /// Whose triangles a blended patch keeps (`blend.keep`).
@@ -128,6 +149,8 @@ impl Default for Blend {
         Blend {
             weight_middle: 0.0,
             weight_large: 0.0,
+            weight_flat: None,
+            surface: BlendSurface::With,
             with: Method::Wavefront,
             keep: BlendKeep::With,
         }
@@ -668,6 +691,7 @@ macro_rules! policy_names {
 
 policy_names!(Search { Full => "full", Delaunay => "delaunay", Both => "both" });
 policy_names!(BlendKeep { With => "with", Accepted => "accepted" });
+policy_names!(BlendSurface { With => "with", Faired => "faired" });
 policy_names!(TriangulationWeight { Area => "area", DihedralArea => "dihedral_area" });
 policy_names!(WavefrontPlacement { EdgePlane => "edge_plane", Interpolated => "interpolated" });
 policy_names!(Weights { Uniform => "uniform", Cotangent => "cotangent", Fujiwara => "fujiwara" });

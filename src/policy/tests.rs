@@ -36,8 +36,14 @@ fn default_file_sets_every_key() {
         let Some(DeValue::Table(t)) = root.get(*section).map(|v| v.get_ref()) else {
             panic!("config/policy.toml lacks [{section}]");
         };
-        assert_eq!(t.len(), keys.len(), "[{section}] has keys not in SECTIONS");
-        for key in *keys {
+        let optional = |key: &str| {
+            OPTIONAL_KEYS
+                .iter()
+                .any(|(s, k, _)| s == section && *k == key)
+        };
+        let required = keys.iter().filter(|k| !optional(k)).count();
+        assert_eq!(t.len(), required, "[{section}] has keys not in SECTIONS");
+        for key in keys.iter().filter(|k| !optional(k)) {
             assert!(
                 t.get(*key).is_some(),
                 "config/policy.toml lacks {section}.{key}"
@@ -46,7 +52,10 @@ fn default_file_sets_every_key() {
         }
     }
     assert_eq!(root.len(), TOP_LEVEL_KEYS.len() + SECTIONS.len());
-    assert_eq!(n, SECTIONS.iter().map(|(_, k)| k.len()).sum::<usize>());
+    assert_eq!(
+        n + OPTIONAL_KEYS.len(),
+        SECTIONS.iter().map(|(_, k)| k.len()).sum::<usize>()
+    );
 }
 
 #[test]
@@ -77,6 +86,29 @@ fn blend_keep_reads_both_values_and_names_them_when_wrong() {
         e.contains("policy.toml:2")
             && e.contains("blend.keep")
             && e.contains("\"with\", \"accepted\""),
+        "{e}"
+    );
+}
+
+#[test]
+fn blend_surface_and_flat_weight_read_and_are_named_when_wrong() {
+    let d = Policy::default();
+    assert_eq!(
+        (d.blend.surface, d.blend.weight_flat),
+        (BlendSurface::With, None)
+    );
+    let p =
+        parse("[blend]\nweight_large = 0.9\nweight_flat = 0.3\nsurface = \"faired\"\n").unwrap();
+    assert_eq!(p.blend.surface, BlendSurface::Faired);
+    assert_eq!(p.blend.weight_flat, Some(0.3));
+    let e = err("[blend]\nsurface = \"both\"\n").to_string();
+    assert!(
+        e.contains("blend.surface") && e.contains("\"with\", \"faired\""),
+        "{e}"
+    );
+    let e = err("[blend]\nweight_flat = 1.5\n").to_string();
+    assert!(
+        e.contains("blend.weight_flat") && e.contains("between 0 and 1"),
         "{e}"
     );
 }
@@ -685,6 +717,8 @@ prop_compose! {
         smooth_weights in arb_name::<Weights>(), scope in arb_name::<SmoothScope>(),
         rings in 1usize..50, boundary in arb_name::<BoundaryRule>(),
         hpde in arb_hpde(), keep in arb_name::<BlendKeep>(),
+        surface in arb_name::<BlendSurface>(),
+        weight_flat in proptest::option::of(0.0f64..=1.0),
     ) -> Settings {
         Settings {
             seed,
@@ -701,7 +735,7 @@ prop_compose! {
             hpde,
             checks: Checks { self_intersection, min_angle_deg },
             limits: Limits { hole_time_ms, ..Limits::default() },
-            blend: Blend { keep, ..Blend::default() },
+            blend: Blend { keep, surface, weight_flat, ..Blend::default() },
             smooth: Smooth {
                 enabled, iterations, lambda: lm.0, mu: lm.1, weights: smooth_weights, scope, rings, boundary,
             },

@@ -136,6 +136,9 @@ impl Settings {
 
         closed("blend.weight_middle", self.blend.weight_middle, 0.0, 1.0)?;
         closed("blend.weight_large", self.blend.weight_large, 0.0, 1.0)?;
+        if let Some(w) = self.blend.weight_flat {
+            closed("blend.weight_flat", w, 0.0, 1.0)?;
+        }
         if matches!(self.blend.with, Method::Close | Method::Fan) {
             return Err(Invalid::new(
                 "blend.with",

@@ -1,6 +1,18 @@
-//! The accepted patch blended with a second method's surface (`[blend]`; not from the
-//! four papers, issue 19).
+//! The accepted patch blended with a second surface (`[blend]`; not from the four
+//! papers, issue 19).
 //!
+//! With `blend.surface = "faired"` the second surface is the accepted patch itself,
+//! faired on its own triangles (`Δ^c x = 0` with the `[fair]` keys, as `min_area_fair`
+//! fairs its patch; the loop and the outer rings fixed): each new vertex moves the
+//! weight of the way to its faired position, and the moved patch is relaxed
+//! tangentially and checked. The wavefront's rows carry the rim's slope on too far
+//! where the surface bends; a thin plate over the same rows is the smooth surface the
+//! rim implies, and is faired from a patch that already bends as the surface does
+//! (the cotangent weights of a flat triangulation pull it flatter). On a flat rim (a
+//! machined part) the rows continue the planes and the thin plate bulges between them:
+//! `blend.weight_flat` is the weight there. Measured in docs/measurements.md.
+//!
+//! With `blend.surface = "with"`:
 //! Where the lost surface bends, the thin plate (`min_area_fair`) tends to flatten it
 //! and the wavefront's rows to carry the rim's slope on too far, so their errors are
 //! often of opposite sign and their mean is closer than either. The hole is filled
@@ -18,13 +30,14 @@
 //! the accepted method and failed. The loop and the input are untouched.
 //! Measured in docs/measurements.md.
 
-use super::{guarded, run_method_fill};
+use super::{guarded, run_method_fill, select};
 use crate::check::Checker;
+use crate::fill::kit::fair;
 use crate::fill::kit::{relax, Deadline, FillContext};
 use crate::geometry::bvh::{closest_on_triangles, tri_box, Bvh};
 use crate::mesh::Mesh;
 use crate::patch::{Hole, Patch};
-use crate::policy::{BlendKeep, Method, Policy};
+use crate::policy::{BlendKeep, BlendSurface, Method, Policy};
 use crate::report::{Attempt, BlendReport, HoleClass, PatchQuality};
 use glam::DVec3;
 use std::time::Instant;
@@ -39,12 +52,29 @@ pub fn weight(policy: &Policy, class: HoleClass) -> f64 {
     }
 }
 
+/// The weight for `hole` and the rim's flat share: the class's [`weight`], or
+/// `blend.weight_flat` where that is set and the rim reads flat by the `select` rim
+/// rule ([`select::rim`]; the share is read only then).
+pub fn hole_weight(mesh: &Mesh, hole: &Hole, policy: &Policy) -> (f64, Option<f64>) {
+    let w = weight(policy, hole.class);
+    let Some(flat) = policy.blend.weight_flat.filter(|_| w > 0.0) else {
+        return (w, None);
+    };
+    let share = select::rim(mesh, hole, &policy.select)
+        .rim
+        .and_then(|r| r.flat_share);
+    match share {
+        Some(s) if s >= policy.select.flat_share => (flat, share),
+        _ => (w, share),
+    }
+}
+
 /// Whether `[blend]` applies to a patch of `method` on `hole`: blending is on for the
-/// hole's class (middle or large), and the patch is another method's and has new
-/// vertices.
+/// hole's class (middle or large), the patch has new vertices, and (with
+/// `surface = "with"`) it is another method's than `blend.with`.
 pub fn applies(policy: &Policy, hole: &Hole, method: Method, patch: &Patch) -> bool {
     weight(policy, hole.class) > 0.0
-        && method != policy.blend.with
+        && (policy.blend.surface == BlendSurface::Faired || method != policy.blend.with)
         && !patch.new_vertices.is_empty()
 }
 
@@ -52,6 +82,9 @@ pub fn applies(policy: &Policy, hole: &Hole, method: Method, patch: &Patch) -> b
 /// it is among them, so it failed there already (made no patch, or one that failed
 /// the checks, or ran out of time).
 pub fn already_failed(policy: &Policy, tried: &[Attempt]) -> Option<String> {
+    if policy.blend.surface != BlendSurface::With {
+        return None;
+    }
     tried
         .iter()
         .find(|a| a.method == policy.blend.with)
@@ -67,8 +100,10 @@ pub fn already_failed(policy: &Policy, tried: &[Attempt]) -> Option<String> {
 /// The report of a blend that was not tried, for `reason`.
 pub fn not_tried(policy: &Policy, hole: &Hole, reason: String) -> BlendReport {
     BlendReport {
-        with: policy.blend.with,
+        surface: policy.blend.surface,
+        with: (policy.blend.surface == BlendSurface::With).then_some(policy.blend.with),
         weight: weight(policy, hole.class),
+        flat_share: None,
         applied: false,
         kept: None,
         reason,
@@ -99,7 +134,10 @@ pub fn blended(
     if let Some(why) = already_failed(policy, tried) {
         return (patch, q, Some(not_tried(policy, hole, why)));
     }
-    let (pulled, rep) = pull(mesh, hole, policy, checker, &patch, guide);
+    let (pulled, rep) = match policy.blend.surface {
+        BlendSurface::With => pull(mesh, hole, policy, checker, &patch, guide),
+        BlendSurface::Faired => pull_faired(mesh, hole, policy, checker, &patch),
+    };
     match pulled {
         Some((pulled, q)) => (pulled, q, Some(rep)),
         None => (patch, q, Some(rep)),
@@ -113,7 +151,9 @@ pub type Guide = (Result<Patch, String>, f64);
 /// Whether [`guide`] is worth making beside `first`, the first method tried on `hole`
 /// (both on the two cores): the blend applies to `first`'s patch when it is accepted.
 pub fn prefetches(policy: &Policy, hole: &Hole, first: Option<Method>) -> bool {
-    weight(policy, hole.class) > 0.0 && first.is_some_and(|m| m != policy.blend.with)
+    policy.blend.surface == BlendSurface::With
+        && weight(policy, hole.class) > 0.0
+        && first.is_some_and(|m| m != policy.blend.with)
 }
 
 /// `blend.with`'s own fill of `hole` as a guide ([`FillContext::guide`]: its first
@@ -150,8 +190,12 @@ pub fn pull(
 ) -> (Option<(Patch, PatchQuality)>, BlendReport) {
     let t0 = Instant::now();
     let with = policy.blend.with;
-    let w = weight(policy, hole.class);
-    let mut rep = not_tried(policy, hole, String::new());
+    let (w, flat_share) = hole_weight(mesh, hole, policy);
+    let mut rep = BlendReport {
+        weight: w,
+        flat_share,
+        ..not_tried(policy, hole, String::new())
+    };
     let (made, guide_ms) = guide.unwrap_or_else(|| self::guide(mesh, hole, policy));
     let elapsed = || guide_ms + t0.elapsed().as_secs_f64() * 1000.0;
     // the blended surface: the accepted patch moved the weight of the way to the
@@ -232,6 +276,90 @@ pub fn pull(
         "blend done"
     );
     (out, rep)
+}
+
+/// `patch` (accepted) with each new vertex moved the hole's weight ([`hole_weight`])
+/// of the way to its position in the same patch faired (`[fair]`), relaxed
+/// tangentially and checked ([`BlendSurface::Faired`]), with its quality when it
+/// passes; and what was done.
+pub fn pull_faired(
+    mesh: &Mesh,
+    hole: &Hole,
+    policy: &Policy,
+    checker: &Checker,
+    patch: &Patch,
+) -> (Option<(Patch, PatchQuality)>, BlendReport) {
+    let t0 = Instant::now();
+    let (w, flat_share) = hole_weight(mesh, hole, policy);
+    let mut rep = BlendReport {
+        weight: w,
+        flat_share,
+        ..not_tried(policy, hole, String::new())
+    };
+    if w == 0.0 {
+        rep.reason = "the rim reads flat and blend.weight_flat is 0".to_string();
+        return (None, rep);
+    }
+    let mut faired = patch.clone();
+    let made = fair::fair_patch(mesh, hole, &mut faired, &policy.fair);
+    let t_fair = t0.elapsed();
+    let out = match made {
+        Err(e) => Err(format!("the fairing failed: {e}")),
+        Ok(()) => {
+            let (moved, shift) = toward(patch, &faired, w);
+            let check = |p: &Patch| checker.check_patch(mesh, &hole.vertices, p, &policy.checks);
+            relax::relax_checked(
+                mesh,
+                hole,
+                &moved,
+                policy.fair.tangential_relax,
+                relax::RELAX_STEP,
+                check,
+            )
+            .map_or_else(|| check(&moved).map(|q| (moved, q)), Ok)
+            .map(|pq| (pq, shift))
+            .map_err(|why| {
+                format!("the patch pulled toward its faired surface failed the checks: {why}")
+            })
+        }
+    };
+    let out = match out {
+        Ok(((p, q), shift)) => {
+            rep.applied = true;
+            rep.kept = Some(BlendKeep::Accepted);
+            rep.moved_vertices = p.new_vertices.len();
+            rep.mean_shift = shift / hole.mean_edge_length.max(f64::MIN_POSITIVE);
+            Some((p, q))
+        }
+        Err(why) => {
+            rep.reason = why;
+            None
+        }
+    };
+    rep.ms = t0.elapsed().as_secs_f64() * 1000.0;
+    tracing::debug!(
+        hole = hole.id,
+        weight = w,
+        fair_ms = t_fair.as_secs_f64() * 1e3,
+        settled_ms = (t0.elapsed() - t_fair).as_secs_f64() * 1e3,
+        applied = rep.applied,
+        "blend toward the faired patch done"
+    );
+    (out, rep)
+}
+
+/// `patch` with each new vertex moved `weight` of the way to the same vertex of
+/// `target` (the same patch, moved), and the mean distance moved.
+fn toward(patch: &Patch, target: &Patch, weight: f64) -> (Patch, f64) {
+    let mut out = patch.clone();
+    let mut total = 0.0;
+    for (p, q) in out.new_vertices.iter_mut().zip(&target.new_vertices) {
+        let d = weight * (*q - *p);
+        total += d.length();
+        *p += d;
+    }
+    let n = out.new_vertices.len().max(1) as f64;
+    (out, total / n)
 }
 
 /// Rounds of [`onto_surface`]: relax, put back onto the surface.
@@ -379,7 +507,8 @@ mod tests {
         let (p, _) = out.expect("applied");
         assert!(rep.applied, "{rep:?}");
         assert_eq!(rep.kept, Some(BlendKeep::Accepted));
-        assert_eq!(rep.with, Method::Wavefront);
+        assert_eq!(rep.with, Some(Method::Wavefront));
+        assert_eq!(rep.surface, BlendSurface::With);
         assert_eq!(rep.moved_vertices, 1);
         assert!(
             (p.new_vertices[0].z - 0.2).abs() < 1e-9,
@@ -388,6 +517,94 @@ mod tests {
         );
         crate::patch::apply_patch(&mut mesh, &hole, &p).expect("applies");
         mesh.validate().expect("valid mesh");
+    }
+
+    /// `Policy::default()` blending toward the faired patch with `weight_middle`, and
+    /// `weight_flat` where the rim reads flat.
+    fn faired_policy(weight_middle: f64, weight_flat: Option<f64>) -> Policy {
+        Policy::default()
+            .edit(|s| {
+                s.blend.surface = BlendSurface::Faired;
+                s.blend.weight_middle = weight_middle;
+                s.blend.weight_flat = weight_flat;
+            })
+            .expect("valid")
+    }
+
+    #[test]
+    fn the_faired_surface_pulls_the_tent_the_weighted_way_down() {
+        // a thin plate over a flat rim is the plane: the apex's faired height is 0
+        let (mut mesh, hole) = sheet_hole(HoleClass::Middle);
+        let checker = Checker::new(&mesh);
+        for (w, want) in [(0.5, 0.2), (0.9, 0.04)] {
+            let policy = faired_policy(w, None);
+            assert!(applies(&policy, &hole, Method::Wavefront, &tent(0.4)));
+            assert!(!prefetches(&policy, &hole, Some(Method::MinAreaFair)));
+            let (out, rep) = pull_faired(&mesh, &hole, &policy, &checker, &tent(0.4));
+            let (p, _) = out.expect("applied");
+            assert!(rep.applied, "{rep:?}");
+            assert_eq!(rep.surface, BlendSurface::Faired);
+            assert_eq!((rep.with, rep.weight, rep.flat_share), (None, w, None));
+            assert_eq!(rep.kept, Some(BlendKeep::Accepted));
+            assert_eq!(p.triangles, tent(0.4).triangles, "its own triangles");
+            let z = p.new_vertices[0].z;
+            assert!((z - want).abs() < 1e-9, "weight {w}: apex at {z}");
+            let shift = (0.4 - want) / hole.mean_edge_length;
+            assert!((rep.mean_shift - shift).abs() < 1e-9, "{rep:?}");
+            let json = serde_json::to_value(&rep).expect("json");
+            assert!(json.get("with").is_none() && json.get("flat_share").is_none());
+            assert_eq!(json["surface"], "faired");
+        }
+        // through the dispatcher's entry: the same patch
+        let policy = faired_policy(0.5, None);
+        let q = checker
+            .check_patch(&mesh, &hole.vertices, &tent(0.4), &policy.checks)
+            .expect("the tent passes");
+        let (p, _, rep) = blended(
+            &mesh,
+            &hole,
+            &policy,
+            &checker,
+            Method::Wavefront,
+            &[],
+            tent(0.4),
+            q,
+            None,
+        );
+        assert!(rep.is_some_and(|r| r.applied));
+        assert!((p.new_vertices[0].z - 0.2).abs() < 1e-9);
+        crate::patch::apply_patch(&mut mesh, &hole, &p).expect("applies");
+        mesh.validate().expect("valid mesh");
+    }
+
+    #[test]
+    fn a_flat_rim_takes_the_flat_weight() {
+        // the sheet is flat everywhere: share 1, over select.flat_share (0.5)
+        let (mesh, hole) = sheet_hole(HoleClass::Middle);
+        let checker = Checker::new(&mesh);
+        let policy = faired_policy(0.9, Some(0.25));
+        assert_eq!(hole_weight(&mesh, &hole, &policy), (0.25, Some(1.0)));
+        let (out, rep) = pull_faired(&mesh, &hole, &policy, &checker, &tent(0.4));
+        let (p, _) = out.expect("applied");
+        assert_eq!((rep.weight, rep.flat_share), (0.25, Some(1.0)));
+        assert!(
+            (p.new_vertices[0].z - 0.3).abs() < 1e-9,
+            "{:?}",
+            p.new_vertices
+        );
+        // a sphere's rim is nowhere flat: the class's weight
+        let (sphere, lp) = crate::testutil::sphere_with_hole(3, 0.4);
+        let mut round = Hole::new(0, &sphere, lp, &policy);
+        round.class = HoleClass::Middle;
+        assert_eq!(hole_weight(&sphere, &round, &policy), (0.9, Some(0.0)));
+        // a flat weight of 0 leaves the patch as it was, and says why
+        let policy = faired_policy(0.9, Some(0.0));
+        let (out, rep) = pull_faired(&mesh, &hole, &policy, &checker, &tent(0.4));
+        assert!(out.is_none() && !rep.applied, "{rep:?}");
+        assert!(rep.reason.contains("weight_flat is 0"), "{rep:?}");
+        // small holes are never blended, whatever the flat weight
+        let (_, small) = sheet_hole(HoleClass::Small);
+        assert_eq!(hole_weight(&mesh, &small, &policy), (0.0, None));
     }
 
     #[test]

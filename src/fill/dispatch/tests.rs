@@ -352,3 +352,42 @@ fn advancing_front_closes_a_divergent_front_itself() {
     mesh.validate().unwrap();
     assert!(mesh.topo.boundary_loops().is_empty());
 }
+
+/// On a sphere hole the wavefront's rows carry the rim's slope on; pulled toward their
+/// own thin plate (`blend.surface = "faired"`) the new vertices come closer to the
+/// sphere (oracle: radius 1), and the log says so.
+#[test]
+fn the_faired_blend_brings_a_sphere_patch_closer_to_the_sphere() {
+    let radial = |blend: bool| {
+        let policy = only(Method::Wavefront)
+            .edit(|s| {
+                if blend {
+                    s.blend.surface = crate::policy::BlendSurface::Faired;
+                    s.blend.weight_middle = 0.9;
+                    s.blend.weight_large = 0.9;
+                }
+            })
+            .unwrap();
+        let raw = sphere_cap_removed(4, 1.0, DVec3::new(0.3, 0.2, 1.0), 0.7);
+        let (mut mesh, lp) = mesh_and_loop(&raw, |_, _| true);
+        let n = mesh.num_vertices();
+        let hole = Hole::new(0, &mesh, lp, &policy);
+        let mut chk = Checker::new(&mesh);
+        let rep = fill_hole(&mut mesh, &hole, &policy, &mut chk);
+        mesh.validate().unwrap();
+        assert_eq!(rep.status, HoleStatus::Filled, "{:?}", rep.tried);
+        assert_eq!(
+            rep.blend.as_ref().is_some_and(|b| b.applied),
+            blend,
+            "{rep:?}"
+        );
+        let new: Vec<f64> = (n..mesh.num_vertices())
+            .map(|v| (mesh.pos(crate::mesh::VertexId::from_idx(v)).length() - 1.0).abs())
+            .collect();
+        assert!(!new.is_empty());
+        new.iter().sum::<f64>() / new.len() as f64
+    };
+    let (rows, blended) = (radial(false), radial(true));
+    eprintln!("mean |r - 1|: wavefront {rows:.5}, blended {blended:.5}");
+    assert!(blended < 0.25 * rows, "wavefront {rows}, blended {blended}");
+}
