@@ -8,7 +8,8 @@ its size class and rim features (flat shares of the edges within 2 rings at 0.5,
 and 5 degrees, ...), and per system the bench's per-hole APE (per mille of the bbox
 diagonal, the bench's own matching of patch pieces to holes) and its point count
 (`SYSTEM_w`: a mesh's APE is the point-weighted mean of its holes'). BENCH (default
-../shared/bench) must hold the bench's Python modules and venv."""
+../shared/bench) must hold the bench's Python modules and venv; PERHOLE_MESHES=a,b
+keeps those meshes only."""
 import sys, os, json, csv
 import numpy as np
 sys.path.insert(0, os.environ.get("BENCH", os.path.join(os.path.dirname(__file__), "..", "..", "shared", "bench")))
@@ -90,6 +91,8 @@ def main():
             hd = os.path.join(base, "holes", name)
             man = json.load(open(os.path.join(hd, "manifest.json")))
             if man["natural"]: continue
+            only = os.environ.get("PERHOLE_MESHES")
+            if only and name not in only.split(","): continue
             diag = man["diag"]; holes = man["holes"]
             Vin, Fin = mio.read_mesh(os.path.join(hd, "holed.obj"))
             Vg, Fg = mio.read_mesh(os.path.join(hd, "gt.obj"))

@@ -152,9 +152,9 @@ pub struct HoleReport {
     /// candidates (absent otherwise).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub selection: Option<Selection>,
-    /// The accepted patch pulled toward a second method's surface, when the blend weight
-    /// of the hole's class is set and its first proposal was another method's (absent
-    /// otherwise).
+    /// The accepted patch pulled toward a second surface (`blend.surface`), when the
+    /// blend weight of the hole's class is set and, with `surface = "with"`, the patch
+    /// is another method's than `blend.with` (absent otherwise).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub blend: Option<BlendReport>,
     pub ms: f64,

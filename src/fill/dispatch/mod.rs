@@ -203,7 +203,7 @@ fn attempt(
 /// First phase of filling a hole, read-only so that holes can run in parallel: orders
 /// the class's methods ([`select::order`]), tries them in that order and stops at the
 /// first patch that passes every check against `mesh`, which [`blend`] may pull toward
-/// a second method's surface.
+/// a second surface.
 pub fn propose(mesh: &Mesh, hole: &Hole, policy: &Policy, checker: &Checker) -> Proposal {
     let t0 = Instant::now();
     let (order, selection) = select::order(mesh, hole, policy, methods_for(policy, hole.class));
