@@ -300,6 +300,10 @@ pub fn pull_faired(
         rep.reason = "the rim reads flat and blend.weight_flat is 0".to_string();
         return (None, rep);
     }
+    if policy.fair.continuity == 0 {
+        rep.reason = "fair.continuity is 0: the patch has no faired surface".to_string();
+        return (None, rep);
+    }
     let mut faired = patch.clone();
     let made = fair::fair_patch(mesh, hole, &mut faired, &policy.fair);
     let t_fair = t0.elapsed();
@@ -602,6 +606,13 @@ mod tests {
         let (out, rep) = pull_faired(&mesh, &hole, &policy, &checker, &tent(0.4));
         assert!(out.is_none() && !rep.applied, "{rep:?}");
         assert!(rep.reason.contains("weight_flat is 0"), "{rep:?}");
+        // without fairing there is no second surface: not applied, and why
+        let unfaired = faired_policy(0.9, None)
+            .edit(|s| s.fair.continuity = 0)
+            .expect("valid");
+        let (out, rep) = pull_faired(&mesh, &hole, &unfaired, &checker, &tent(0.4));
+        assert!(out.is_none() && !rep.applied, "{rep:?}");
+        assert!(rep.reason.contains("fair.continuity is 0"), "{rep:?}");
         // small holes are never blended, whatever the flat weight
         let (_, small) = sheet_hole(HoleClass::Small);
         assert_eq!(hole_weight(&mesh, &small, &policy), (0.0, None));
