@@ -217,15 +217,14 @@ pub fn pull(
     // the moves are uneven, so the triangles are evened out again as after any
     // method; the unrelaxed patch is the fallback
     let settled = |p: Patch| {
-        relax::relax_checked(
+        relax::settled(
             mesh,
             hole,
-            &p,
+            p,
             policy.fair.tangential_relax,
             relax::RELAX_STEP,
             check,
         )
-        .map_or_else(|| check(&p).map(|q| (p, q)), Ok)
     };
     let t_moved = t0.elapsed();
     let mut order = Vec::new();
@@ -311,16 +310,14 @@ pub fn pull_faired(
         Err(e) => Err(format!("the fairing failed: {e}")),
         Ok(()) => {
             let (moved, shift) = toward(patch, &faired, w);
-            let check = |p: &Patch| checker.check_patch(mesh, &hole.vertices, p, &policy.checks);
-            relax::relax_checked(
+            relax::settled(
                 mesh,
                 hole,
-                &moved,
+                moved,
                 policy.fair.tangential_relax,
                 relax::RELAX_STEP,
-                check,
+                |p| checker.check_patch(mesh, &hole.vertices, p, &policy.checks),
             )
-            .map_or_else(|| check(&moved).map(|q| (moved, q)), Ok)
             .map(|pq| (pq, shift))
             .map_err(|why| {
                 format!("the patch pulled toward its faired surface failed the checks: {why}")

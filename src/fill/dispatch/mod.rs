@@ -184,18 +184,15 @@ fn attempt(
         }
     };
     // even out the triangles tangentially; keep that only if it passes the checks
-    if let Some((relaxed, q)) = relax::relax_checked(
+    match relax::settled(
         mesh,
         hole,
-        &patch,
+        patch,
         policy.fair.tangential_relax,
         relax::RELAX_STEP,
         |p| checker.check_patch(mesh, &hole.vertices, p, &policy.checks),
     ) {
-        return Ok(accepted(relaxed, q, None));
-    }
-    match checker.check_patch(mesh, &hole.vertices, &patch, &policy.checks) {
-        Ok(q) => Ok(accepted(patch, q, None)),
+        Ok((p, q)) => Ok(accepted(p, q, None)),
         Err(why) => Err((failed(Outcome::Rejected, why.to_string()), false)),
     }
 }

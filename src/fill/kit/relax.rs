@@ -137,6 +137,24 @@ pub fn tangential_relax_pinned(
 /// Rounds of re-relaxing with more vertices held (see [`relax_checked`]).
 const PIN_ROUNDS: usize = 2;
 
+/// `patch` relaxed ([`relax_checked`]) where that passes `check`, else as it is where
+/// that passes, with what `check` made of it; else the failure of `patch` as it is.
+/// What the dispatcher does to every patch a method returns unchecked, and the blend to
+/// a moved patch.
+pub fn settled<Q>(
+    mesh: &Mesh,
+    hole: &Hole,
+    patch: Patch,
+    iterations: usize,
+    step: f64,
+    mut check: impl FnMut(&Patch) -> Result<Q, CheckFailure>,
+) -> Result<(Patch, Q), CheckFailure> {
+    match relax_checked(mesh, hole, &patch, iterations, step, &mut check) {
+        Some(relaxed) => Ok(relaxed),
+        None => check(&patch).map(|q| (patch, q)),
+    }
+}
+
 /// Relaxes `patch` ([`tangential_relax`]) and returns the relaxed patch with what
 /// `check` made of it, if it passes. A relaxed patch that fails at some triangles is
 /// relaxed again from `patch` with the new corners of those triangles and their new

@@ -523,7 +523,8 @@ mod tests {
     }
 
     /// A flat grid with a round hole in the middle, and that hole's loop.
-    fn holed_grid() -> (Mesh, Vec<crate::mesh::VertexId>) {
+    /// A flat grid with a round hole, and that hole under `policy`.
+    fn grid_hole(policy: &Policy) -> (Mesh, Hole) {
         let raw = cut_faces(grid(16, -1.0, 1.0, |_, _| 0.0), |c| c.length() <= 0.55);
         let (mesh, _) = Mesh::from_raw(&raw);
         let lp = mesh
@@ -532,7 +533,8 @@ mod tests {
             .into_iter()
             .min_by(|a, b| a.len().cmp(&b.len()))
             .unwrap();
-        (mesh, lp)
+        let hole = Hole::new(0, &mesh, lp, policy);
+        (mesh, hole)
     }
 
     /// A failure at a triangle on a loop edge names that edge (also the closing edge
@@ -570,9 +572,8 @@ mod tests {
     /// and the repaired patch passes every check.
     #[test]
     fn a_patch_overlapping_the_mesh_is_repaired_locally() {
-        let (mesh, lp) = holed_grid();
         let policy = Policy::default();
-        let hole = Hole::new(0, &mesh, lp, &policy);
+        let (mesh, hole) = grid_hole(&policy);
         let ctx = FillContext::new(&mesh, &hole, &policy);
         let mut patch = kit_fill(&ctx).unwrap();
         let checker = Checker::new(&mesh);
@@ -635,9 +636,8 @@ mod tests {
     /// The variant that made a passing patch is named when it is not the first.
     #[test]
     fn a_later_variant_that_passes_is_named() {
-        let (mesh, lp) = holed_grid();
         let policy = Policy::default();
-        let hole = Hole::new(0, &mesh, lp, &policy);
+        let (mesh, hole) = grid_hole(&policy);
         let ctx = FillContext::new(&mesh, &hole, &policy);
         let variants = [("policy", policy.clone()), ("again", policy.clone())];
         let run = |at: usize, c: &FillContext| {
@@ -662,13 +662,12 @@ mod tests {
     /// both rejected.
     #[test]
     fn a_guide_keeps_its_first_variant_as_made_when_it_fails_the_checks() {
-        let (mesh, lp) = holed_grid();
         let loose = Policy::default();
         // no refined patch has every angle at 29.9 degrees or more
         let strict = loose
             .edit(|s| s.checks.min_angle_deg = 29.9)
             .expect("valid");
-        let hole = Hole::new(0, &mesh, lp, &strict);
+        let (mesh, hole) = grid_hole(&strict);
         let made = kit_fill(&FillContext::new(&mesh, &hole, &loose)).unwrap();
         let variants = [("policy", strict.clone()), ("again", strict.clone())];
         let calls = std::cell::Cell::new(0);
