@@ -243,6 +243,7 @@ mod tests {
             checker: Some(&checker),
             rim_bound: false,
             guide: false,
+            finish: None,
         };
         let (patch, q) = fill_checked(&ctx).unwrap();
         assert!(patch.new_vertices.is_empty());

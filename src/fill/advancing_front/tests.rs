@@ -794,6 +794,7 @@ fn gives_up_at_once_past_the_patch_size_limit() {
         checker: None,
         rim_bound: false,
         guide: false,
+        finish: None,
     });
     policy = policy
         .edit(|s| s.limits.max_patch_triangles = (est as usize + 1).max(100))

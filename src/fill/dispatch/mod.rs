@@ -103,8 +103,6 @@ pub struct Proposal {
     pub tried: Vec<Attempt>,
     /// The accepted attempt.
     pub accepted: Option<Accepted>,
-    /// What `[blend]` did to the accepted patch (`None` when it does not apply).
-    pub blend: Option<BlendReport>,
     /// Time spent, in milliseconds.
     pub ms: f64,
 }
@@ -121,6 +119,8 @@ pub struct Accepted {
     pub variant: Option<&'static str>,
     /// Time spent on it, in milliseconds.
     pub ms: f64,
+    /// What `[blend]` did to it (`None` when the blend does not apply).
+    pub blend: Option<BlendReport>,
 }
 
 /// One method on one hole: run it, relax the patch tangentially, check it. `Ok` holds
@@ -136,6 +136,10 @@ fn attempt(
     rim_bound: bool,
 ) -> Result<Accepted, (Attempt, bool)> {
     let ta = Instant::now();
+    // `[blend]` toward the patch's faired surface as the self-checked method's last
+    // step (it relaxes and checks the patch itself)
+    let finisher = blend::Finisher::new(mesh, hole, policy, checker, method);
+    let finish = |p: &Patch| finisher.finish(p);
     let ctx = FillContext {
         mesh,
         hole,
@@ -144,6 +148,7 @@ fn attempt(
         checker: Some(checker),
         rim_bound,
         guide: false,
+        finish: Some(&finish),
     };
     let failed = |outcome, reason: String| Attempt {
         method,
@@ -158,6 +163,7 @@ fn attempt(
         quality,
         variant,
         ms: ms_since(ta),
+        blend: None,
     };
     let result = guarded(method, || run_method_checked(method, &ctx)).and_then(|p| {
         ctx.deadline.check()?;
@@ -165,7 +171,13 @@ fn attempt(
     });
     let patch = match result {
         // relaxed and checked by the method itself, with this checker
-        Ok((p, Some(q))) => return Ok(accepted(p, q.quality, q.variant)),
+        Ok((p, Some(q))) => {
+            let blend = finisher.report(&p);
+            return Ok(Accepted {
+                blend,
+                ..accepted(p, q.quality, q.variant)
+            });
+        }
         Ok((p, None)) => p,
         Err(FillError::Timeout) => {
             return Err((
@@ -215,7 +227,8 @@ pub fn propose(mesh: &Mesh, hole: &Hole, policy: &Policy, checker: &Checker) -> 
         (propose_from(mesh, hole, policy, checker, order, 0), None)
     };
     p.selection = selection;
-    if let Some(a) = p.accepted.take() {
+    // a patch the method finished with the blend is as the blend left it
+    if let Some(a) = p.accepted.take_if(|a| a.blend.is_none()) {
         let (patch, quality, rep) = blend::blended(
             mesh,
             hole,
@@ -228,11 +241,11 @@ pub fn propose(mesh: &Mesh, hole: &Hole, policy: &Policy, checker: &Checker) -> 
             guide,
         );
         let ms = a.ms + rep.as_ref().map_or(0.0, |r| r.ms);
-        p.blend = rep;
         p.accepted = Some(Accepted {
             patch,
             quality,
             ms,
+            blend: rep,
             ..a
         });
     }
@@ -261,7 +274,6 @@ fn propose_from(
                         selection: None,
                         tried,
                         accepted: Some(Accepted { at: i, ..a }),
-                        blend: None,
                         ms: ms_since(t0),
                     }
                 }
@@ -277,7 +289,6 @@ fn propose_from(
         selection: None,
         tried,
         accepted: None,
-        blend: None,
         ms: ms_since(t0),
     }
 }
@@ -309,7 +320,6 @@ pub fn finish_hole(
         return rep;
     }
     let methods = proposal.order;
-    let mut blend = proposal.blend;
     let mut next = Some(proposal.accepted);
     let mut from = methods.len();
     // the proposal first, then each later method with full checks
@@ -327,8 +337,6 @@ pub fn finish_hole(
                             variant: a.variant.map(str::to_string),
                             ms: a.ms,
                         });
-                        // the blend was of this patch; a later one is not blended
-                        blend = None;
                         None
                     }
                 }
@@ -350,6 +358,7 @@ pub fn finish_hole(
             quality,
             variant,
             ms,
+            blend,
         }) = candidate
         else {
             continue;
@@ -375,16 +384,13 @@ pub fn finish_hole(
                 done(&mut rep);
                 return rep;
             }
-            Err(why) => {
-                blend = None;
-                rep.tried.push(Attempt {
-                    method,
-                    outcome: Outcome::Rejected,
-                    reason: why.to_string(),
-                    variant,
-                    ms,
-                })
-            }
+            Err(why) => rep.tried.push(Attempt {
+                method,
+                outcome: Outcome::Rejected,
+                reason: why.to_string(),
+                variant,
+                ms,
+            }),
         }
     }
     rep.reason = if rep.tried.is_empty() {

@@ -221,6 +221,7 @@ pub fn validate(mesh: &Mesh, hole: &Hole, policy: &Policy, candidates: &[Method]
             checker: None,
             rim_bound: false,
             guide: false,
+            finish: None,
         };
         let run = guarded(method, || run_method_fill(method, &ctx));
         let c = match run {

@@ -73,8 +73,8 @@ fn a_proposal_that_meets_an_earlier_patch_fails_over_to_the_next_method() {
             quality: q,
             variant: None,
             ms: 0.0,
+            blend: None,
         }),
-        blend: None,
         ms: 0.0,
     };
     let rep = finish_hole(&mut m, &low, &policy, &mut chk, proposal);

@@ -19,8 +19,9 @@ pub use error::{Cause, FillError, TooLarge, VariantFailure, VariantWhy};
 use crate::check::Checker;
 use crate::geometry::measure;
 use crate::mesh::Mesh;
-use crate::patch::Hole;
+use crate::patch::{Hole, Patch};
 use crate::policy::Policy;
+use crate::report::PatchQuality;
 use glam::DVec3;
 use std::time::{Duration, Instant};
 
@@ -50,6 +51,12 @@ impl Deadline {
     }
 }
 
+/// A caller's last step for each patch a self-checked method makes ([`retry`]): the
+/// patch finished (moved, relaxed and checked by the caller) with the quality of the
+/// checks it passed, or `None` when it does not apply or fails, and the method then
+/// relaxes and checks the patch as made itself.
+pub type Finish<'a> = dyn Fn(&Patch) -> Option<(Patch, PatchQuality)> + Sync + 'a;
+
 /// What a method sees: the mesh (read-only), the hole, the policy, the deadline.
 pub struct FillContext<'a> {
     pub mesh: &'a Mesh,
@@ -69,6 +76,11 @@ pub struct FillContext<'a> {
     /// as made rather than running the others (joint seed 2: six wavefront variants,
     /// 450 ms, for a guide).
     pub guide: bool,
+    /// The dispatcher's `[blend]` toward the patch's own faired surface, applied by a
+    /// self-checked method to each patch it makes before its own relaxation: the
+    /// blend relaxes and checks the patch anyway, so relaxing it first was done twice
+    /// (`None`: the patch is relaxed and checked as made).
+    pub finish: Option<&'a Finish<'a>>,
 }
 
 impl FillContext<'_> {
@@ -97,6 +109,7 @@ impl<'a> FillContext<'a> {
             checker: None,
             rim_bound: false,
             guide: false,
+            finish: None,
         }
     }
 }

@@ -103,6 +103,7 @@ pub fn first_passing_unless(
             checker: ctx.checker,
             rim_bound: ctx.rim_bound,
             guide: ctx.guide,
+            finish: ctx.finish,
         };
         let t = std::time::Instant::now();
         let made = run(at, &sub);
@@ -141,6 +142,11 @@ pub fn first_passing_unless(
                         check,
                     )
                 };
+                // the caller's last step, which relaxes and checks the patch itself
+                if let Some((finished, q)) = ctx.finish.and_then(|f| f(&p)) {
+                    trace_settled(ctx, name, t, true);
+                    return Ok((finished, passed(q)));
+                }
                 // relaxed if that passes (parts held where it fails), else as it is
                 if let Some((relaxed, q)) = relax(&p) {
                     trace_settled(ctx, name, t, true);
@@ -690,5 +696,51 @@ mod tests {
         assert_eq!(calls.get(), 1, "the second variant is not run");
         assert_eq!(q, None, "unchecked");
         assert_eq!(p, made, "as made, not relaxed");
+    }
+
+    /// A caller's finishing step ([`FillContext::finish`]) gets each made patch: what
+    /// it returns is the result, unrelaxed by the method; where it returns `None` the
+    /// made patch is relaxed and checked as without it.
+    #[test]
+    fn a_finished_patch_is_the_result_and_is_not_relaxed_again() {
+        let policy = Policy::default();
+        let (mesh, hole) = grid_hole(&policy);
+        let variants = [("policy", policy.clone()), ("again", policy.clone())];
+        let plain = FillContext::new(&mesh, &hole, &policy);
+        let made = kit_fill(&plain).unwrap();
+        let (relaxed, q) = first_passing_at(&plain, &variants, |_, c| kit_fill(c)).unwrap();
+        assert_ne!(relaxed, made, "relaxed by the method");
+        // the finish lifts every new vertex a little and reports a quality of its own
+        let calls = std::sync::atomic::AtomicUsize::new(0);
+        let mut lifted = made.clone();
+        for p in &mut lifted.new_vertices {
+            p.z += 0.01;
+        }
+        let own = PatchQuality {
+            min_angle_deg: 1.0,
+            ..q.clone().unwrap().quality
+        };
+        let finish = |p: &Patch| {
+            calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            assert_eq!(*p, made, "the patch as made");
+            Some((lifted.clone(), own.clone()))
+        };
+        let ctx = FillContext {
+            finish: Some(&finish),
+            ..FillContext::new(&mesh, &hole, &policy)
+        };
+        let (p, passed) = first_passing_at(&ctx, &variants, |_, c| kit_fill(c)).unwrap();
+        assert_eq!(p, lifted, "the finished patch, not relaxed");
+        assert_eq!(passed.map(|q| q.quality), Some(own));
+        assert_eq!(calls.into_inner(), 1, "the first variant's patch only");
+        // a finish that does not apply leaves the method's own relaxation
+        let none = |_: &Patch| None;
+        let ctx = FillContext {
+            finish: Some(&none),
+            ..FillContext::new(&mesh, &hole, &policy)
+        };
+        let (p, passed) = first_passing_at(&ctx, &variants, |_, c| kit_fill(c)).unwrap();
+        assert_eq!(p, relaxed);
+        assert_eq!(passed, q);
     }
 }

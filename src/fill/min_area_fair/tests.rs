@@ -36,6 +36,7 @@ fn fill_checked(mesh: &mut Mesh, hole: &Hole, policy: &Policy) -> Patch {
         checker: None,
         rim_bound: false,
         guide: false,
+        finish: None,
     };
     let patch = fill(&ctx).unwrap();
     check_topology(mesh, &hole.vertices, &patch).unwrap();
@@ -355,7 +356,7 @@ proptest! {
     ) {
         let (mut mesh, hole, mut policy) = star_hole(&radii, lift);
         policy = policy.edit(|s| s.refine.restricted_search_above = restricted).unwrap();
-        let ctx = FillContext { mesh: &mesh, hole: &hole, policy: &policy, deadline: Deadline::none(), checker: None, rim_bound: false, guide: false };
+        let ctx = FillContext { mesh: &mesh, hole: &hole, policy: &policy, deadline: Deadline::none(), checker: None, rim_bound: false, guide: false, finish: None };
         let patch = fill(&ctx).unwrap();
         check_topology(&mesh, &hole.vertices, &patch).unwrap();
         apply_patch(&mut mesh, &hole, &patch).unwrap();

@@ -707,6 +707,7 @@ fn a_resumed_run_equals_a_fresh_one() {
         checker: None,
         rim_bound: false,
         guide: false,
+        finish: None,
     };
     let mut short = policy.clone();
     short = short
