@@ -107,16 +107,24 @@ fn build_operator(local: &LocalMesh, weights: Weights, norm: Normalization) -> O
             }
         }
         // mixed Voronoi area (Meyer et al. 2003)
-        let ang = measure::angles(a, b, c);
-        let obtuse = ang.iter().position(|&x| x > std::f64::consts::FRAC_PI_2);
+        // the obtuse corner: its two edges' dot product is negative (no angles)
+        let obtuse = [(a, b, c), (b, c, a), (c, a, b)]
+            .iter()
+            .position(|&(p, q, r)| (q - p).dot(r - p) < 0.0);
+        // the cotangent at each corner, once
+        let cots = [
+            measure::cot_at(a, b, c),
+            measure::cot_at(b, c, a),
+            measure::cot_at(c, a, b),
+        ];
         for corner in 0..3 {
             let i = t[corner] as usize;
             let j = t[(corner + 1) % 3] as usize;
             let k = t[(corner + 2) % 3] as usize;
             let contrib = match obtuse {
                 None => {
-                    let cj = measure::cot_at(p[j], p[k], p[i]);
-                    let ck = measure::cot_at(p[k], p[i], p[j]);
+                    let cj = cots[(corner + 1) % 3];
+                    let ck = cots[(corner + 2) % 3];
                     ((p[i] - p[k]).length_squared() * cj + (p[i] - p[j]).length_squared() * ck)
                         / 8.0
                 }
@@ -128,12 +136,9 @@ fn build_operator(local: &LocalMesh, weights: Weights, norm: Normalization) -> O
         for corner in 0..3 {
             let i = t[corner];
             let j = t[(corner + 1) % 3];
-            let k = t[(corner + 2) % 3];
             let key = (i.min(j), i.max(j));
-            cot.push((
-                key,
-                measure::cot_at(p[k as usize], p[i as usize], p[j as usize]),
-            ));
+            // the angle opposite edge i-j, at the third corner
+            cot.push((key, cots[(corner + 2) % 3]));
         }
     }
     cot.sort_by_key(|e| e.0);
