@@ -308,23 +308,43 @@ pub fn pull_faired(
     let mut faired = patch.clone();
     let made = fair::fair_patch(mesh, hole, &mut faired, &policy.fair);
     let t_fair = t0.elapsed();
+    let settle = |weight: f64| {
+        let (moved, shift) = toward(patch, &faired, weight);
+        relax::settled(
+            mesh,
+            hole,
+            moved,
+            policy.fair.tangential_relax,
+            relax::RELAX_STEP,
+            |p| checker.check_patch(mesh, &hole.vertices, p, &policy.checks),
+        )
+        .map(|pq| (pq, shift))
+    };
     let out = match made {
         Err(e) => Err(format!("the fairing failed: {e}")),
-        Ok(()) => {
-            let (moved, shift) = toward(patch, &faired, w);
-            relax::settled(
-                mesh,
-                hole,
-                moved,
-                policy.fair.tangential_relax,
-                relax::RELAX_STEP,
-                |p| checker.check_patch(mesh, &hole.vertices, p, &policy.checks),
-            )
-            .map(|pq| (pq, shift))
-            .map_err(|why| {
-                format!("the patch pulled toward its faired surface failed the checks: {why}")
-            })
-        }
+        Ok(()) => match settle(w) {
+            Ok(done) => Ok(done),
+            // rows folded over each other (joint seed 2's 202-vertex hole, every
+            // wavefront variant) are untangled by the thin plate on their own
+            // triangles, not by a share of the way to it
+            Err(why) if w < 1.0 => match settle(1.0) {
+                Ok(done) => {
+                    rep.weight = 1.0;
+                    rep.reason = format!(
+                        "pulled {w} of the way the patch failed the checks ({why}); pulled \
+                         all the way onto its faired surface"
+                    );
+                    Ok(done)
+                }
+                Err(again) => Err(format!(
+                    "the patch pulled toward its faired surface failed the checks: {why}; \
+                     pulled all the way: {again}"
+                )),
+            },
+            Err(why) => Err(format!(
+                "the patch pulled toward its faired surface failed the checks: {why}"
+            )),
+        },
     };
     let out = match out {
         Ok(((p, q), shift)) => {
@@ -685,6 +705,49 @@ mod tests {
             .is_none());
         assert_eq!(fin.finish(&stray), None);
         assert_eq!(fin.finish(&tent(0.4)), None, "not after a failure");
+    }
+
+    /// Where the patch pulled the weighted way still fails the checks (here an apex
+    /// beyond the loop, whose triangles fold over the sheet), it is pulled all the way
+    /// onto its faired surface, and the log says so; where that fails too, the
+    /// accepted patch is kept with both reasons.
+    #[test]
+    fn a_pull_that_fails_the_checks_is_made_all_the_way() {
+        let (mesh, hole) = sheet_hole(HoleClass::Middle);
+        let checker = Checker::new(&mesh);
+        // uniform weights: the faired apex is the middle whatever the folded fan's
+        // angles (cotangents of a folded fan are not those of the surface)
+        let policy = faired_policy(0.5, None)
+            .edit(|s| {
+                s.fair.tangential_relax = 0;
+                s.fair.weights = crate::policy::Weights::Uniform;
+            })
+            .expect("valid");
+        let check = |p: &Patch| checker.check_patch(&mesh, &hole.vertices, p, &policy.checks);
+        let folded = fan(8, DVec3::new(6.0, 3.0, 0.0));
+        // halfway to the faired apex (the middle of the flat hole) it still folds
+        assert!(check(&folded).is_err());
+        assert!(check(&fan(8, DVec3::new(4.5, 3.0, 0.0))).is_err());
+        let (out, rep) = pull_faired(&mesh, &hole, &policy, &checker, &folded);
+        let Some((p, _)) = out else {
+            panic!("not applied: {rep:?}");
+        };
+        assert!(rep.applied, "{rep:?}");
+        assert_eq!(rep.weight, 1.0);
+        assert!(rep.reason.contains("all the way"), "{}", rep.reason);
+        let apex = p.new_vertices[0];
+        assert!(apex.distance(DVec3::new(3.0, 3.0, 0.0)) < 1e-9, "{apex}");
+        assert!(check(&p).is_ok());
+        // a patch that fails however far it is pulled: a triangle twice over
+        let mut twice = tent(0.4);
+        twice.triangles.push(twice.triangles[0]);
+        let (out, rep) = pull_faired(&mesh, &hole, &policy, &checker, &twice);
+        assert!(out.is_none() && !rep.applied);
+        assert!(
+            rep.reason.contains("pulled all the way: "),
+            "{}",
+            rep.reason
+        );
     }
 
     #[test]
