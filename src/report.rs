@@ -168,7 +168,9 @@ pub struct BlendReport {
     /// The method whose patch it was pulled toward, with `surface = "with"`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub with: Option<Method>,
-    /// The weight used: the class's, or `blend.weight_flat` where the rim reads flat.
+    /// The weight used: the class's, or `blend.weight_flat` where the rim reads flat;
+    /// 1 where the pull that far failed the checks and the full pull passed (`reason`
+    /// says so).
     pub weight: f64,
     /// The share of the rim's edges that are flat, where `blend.weight_flat` is set.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -178,8 +180,8 @@ pub struct BlendReport {
     /// Whose triangles the applied patch has (`blend.keep`, or `accepted` where
     /// `with`'s pulled patch failed the checks); `None` when not applied.
     pub kept: Option<BlendKeep>,
-    /// Why it was not applied, or why `blend.with`'s triangles were not kept where
-    /// the accepted patch's were (empty otherwise).
+    /// Why it was not applied, why `blend.with`'s triangles were not kept where the
+    /// accepted patch's were, or why it was pulled all the way (empty otherwise).
     pub reason: String,
     /// New vertices moved.
     pub moved_vertices: usize,

@@ -10,7 +10,11 @@
 //! rim implies, and is faired from a patch that already bends as the surface does
 //! (the cotangent weights of a flat triangulation pull it flatter). On a flat rim (a
 //! machined part) the rows continue the planes and the thin plate bulges between them:
-//! `blend.weight_flat` is the weight there. Measured in docs/measurements.md.
+//! `blend.weight_flat` is the weight there. A pull that fails the checks is tried all
+//! the way (weight 1): rows folded over each other are untangled by the thin plate on
+//! their own triangles. The pull is a self-checked method's last step ([`Finisher`],
+//! [`FillContext::finish`]): each patch a variant makes is pulled, relaxed and checked
+//! once. Measured in docs/measurements.md.
 //!
 //! With `blend.surface = "with"`:
 //! Where the lost surface bends, the thin plate (`min_area_fair`) tends to flatten it
@@ -376,7 +380,8 @@ pub fn pull_faired(
 /// `surface = "faired"`. Where it fails (the pulled patch fails the checks), the method
 /// relaxes and checks the patch as made, and the dispatcher blends what it accepts as
 /// before ([`blended`]); after one failure the later variants are not finished either
-/// (joint seed 2: six variants failed the checks either way, 30 ms each).
+/// (a pull that fails even all the way fails on the other variants' rows too: joint
+/// seed 2 before the full pull, six variants, 30 ms each).
 pub struct Finisher<'a> {
     mesh: &'a Mesh,
     hole: &'a Hole,
