@@ -30,8 +30,9 @@ pub fn run_method(method: Method, ctx: &FillContext) -> Result<Patch, FillError>
 }
 
 /// Runs one method; with the patch, the quality of the checks it already passed
-/// inside the method (the self-checked methods `min_area_fair`, `wavefront`, `hpde`
-/// and `lssvm_poisson` relax and check their patch with the dispatcher's checker, see
+/// inside the method (the self-checked methods `min_area_fair`, `advancing_front`,
+/// `wavefront`, `hpde` and `lssvm_poisson` relax and check their patch with the
+/// dispatcher's checker, or hand it to [`FillContext::finish`], see
 /// [`crate::fill::kit::retry`]), or `None` when the dispatcher must relax and check it.
 pub fn run_method_checked(
     method: Method,

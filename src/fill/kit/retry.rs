@@ -21,6 +21,10 @@
 //! ([`FillContext::rim_bound`]: on that vase hole, `min_area_fair`'s second weight
 //! failed too, 80 ms). A patch that is only a surface to pull toward
 //! ([`FillContext::guide`]) keeps its first variant as made where that fails the checks.
+//! A caller's last step ([`FillContext::finish`]: the dispatcher's blend toward the
+//! patch's faired surface, which relaxes and checks it) gets each made patch first;
+//! what it returns is the variant's result, and only where it returns nothing is the
+//! patch relaxed and checked here.
 
 use super::relax::{relax_checked, RELAX_STEP};
 use super::{Cause, FillContext, FillError, VariantFailure, VariantWhy};
