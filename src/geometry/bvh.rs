@@ -453,6 +453,49 @@ pub fn closest_on_triangles(bvh: &Bvh, tris: &[[DVec3; 3]], p: DVec3, r: f64) ->
         .min_by(|x, y| (*x - p).length().total_cmp(&(*y - p).length()))
 }
 
+/// The triangle of `tris` (indexed by `bvh`, built over their boxes) closest to `p`,
+/// with the closest point on it: the smallest squared distance, ties to the lowest
+/// index, which is what a scan in index order finds. Boxes of half-width `r` around
+/// `p`, doubled until the point found lies within the box (every triangle at most that
+/// far was then visited). `None` when there is no triangle.
+pub fn closest_triangle(
+    bvh: &Bvh,
+    tris: &[[DVec3; 3]],
+    p: DVec3,
+    r: f64,
+) -> Option<(usize, DVec3)> {
+    let closer = |best: Option<(f64, usize, DVec3)>, d: f64, i: usize| {
+        best.is_none_or(|(bd, bi, _)| d < bd || (d == bd && i < bi))
+    };
+    let mut r = r.max(f64::MIN_POSITIVE);
+    for _ in 0..64 {
+        let mut best: Option<(f64, usize, DVec3)> = None;
+        bvh.query(p - DVec3::splat(r), p + DVec3::splat(r), |i| {
+            let [a, b, c] = tris[i];
+            let q = closest_point_on_triangle(p, a, b, c);
+            let d = (q - p).length_squared();
+            if closer(best, d, i) {
+                best = Some((d, i, q));
+            }
+            false
+        });
+        if let Some((_, i, q)) = best.filter(|&(d, _, _)| d <= r * r) {
+            return Some((i, q));
+        }
+        r *= 2.0;
+    }
+    // reached only for non-finite input or distances beyond 2^64 r: the scan itself
+    let mut best: Option<(f64, usize, DVec3)> = None;
+    for (i, &[a, b, c]) in tris.iter().enumerate() {
+        let q = closest_point_on_triangle(p, a, b, c);
+        let d = (q - p).length_squared();
+        if best.is_none_or(|(bd, _, _)| d < bd) {
+            best = Some((d, i, q));
+        }
+    }
+    best.map(|(_, i, q)| (i, q))
+}
+
 /// Bounding box of a triangle.
 pub fn tri_box(t: &[DVec3; 3]) -> (DVec3, DVec3) {
     (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]))
@@ -651,6 +694,42 @@ mod tests {
                     }
                 }
             }
+        }
+
+        /// The tree's closest triangle is the scan's (smallest squared distance, the
+        /// lowest index among equals, here made by repeating triangles), from any
+        /// starting radius and for points far outside.
+        #[test]
+        fn closest_triangle_matches_the_scan(
+            tris in prop::collection::vec(prop::array::uniform9(-10.0f64..10.0), 1..120),
+            pts in prop::collection::vec(prop::array::uniform3(-40.0f64..40.0), 1..20),
+            r in 0.001f64..5.0,
+            twice in 0usize..120,
+        ) {
+            let mut tris: Vec<[DVec3; 3]> = tris
+                .iter()
+                .map(|t| {
+                    let a = DVec3::new(t[0], t[1], t[2]);
+                    [a, a + DVec3::new(t[3], t[4], t[5]) * 0.2, a + DVec3::new(t[6], t[7], t[8]) * 0.2]
+                })
+                .collect();
+            let again = tris[twice % tris.len()];
+            tris.push(again);
+            let bvh = Bvh::build(tris.len(), |i| tri_box(&tris[i]));
+            for p in &pts {
+                let p = DVec3::from_array(*p);
+                let mut scan: Option<(f64, usize, DVec3)> = None;
+                for (i, &[a, b, c]) in tris.iter().enumerate() {
+                    let q = closest_point_on_triangle(p, a, b, c);
+                    let d = (q - p).length_squared();
+                    if scan.is_none_or(|(bd, _, _)| d < bd) {
+                        scan = Some((d, i, q));
+                    }
+                }
+                let want = scan.map(|(_, i, q)| (i, q));
+                prop_assert_eq!(closest_triangle(&bvh, &tris, p, r), want);
+            }
+            prop_assert_eq!(closest_triangle(&Bvh::build(0, |_| tri_box(&tris[0])), &[], DVec3::ZERO, r), None);
         }
 
         #[test]

@@ -4,7 +4,8 @@
 use super::predict::{fit_plane, Predicted, Segmentation};
 use crate::fasthash::HashMap;
 use crate::fill::kit::{Deadline, FillError};
-use crate::geometry::measure::{closest_point_on_triangle, newell_normal, point_in_polygon};
+use crate::geometry::bvh::{closest_triangle, tri_box, Bvh};
+use crate::geometry::measure::{newell_normal, point_in_polygon};
 use crate::geometry::predicates::{self, orient2, p2, P2};
 use glam::{DVec2, DVec3};
 use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
@@ -258,22 +259,23 @@ pub fn over_surface(
             "hpde: the loop's triangulation names a vertex outside the loop",
         ));
     }
+    // the closest triangle of each point, found in a tree over the triangles (the
+    // same one a scan finds: ties to the lowest index), searched first within one
+    // mean loop edge
+    let tris: Vec<[DVec3; 3]> = surface
+        .iter()
+        .map(|t| [0, 1, 2].map(|c| bp[corner(t, c)]))
+        .collect();
+    let tree = Bvh::build(tris.len(), |i| tri_box(&tris[i]));
+    let k = bp.len();
+    let reach = (0..k).map(|i| bp[i].distance(bp[(i + 1) % k])).sum::<f64>() / k.max(1) as f64;
     let mut out = Vec::with_capacity(pts.len());
     for (i, pr) in pts.iter().enumerate() {
         if i % 256 == 255 {
             deadline.check()?;
         }
         let p = pr.pos;
-        let mut best: Option<(f64, usize, DVec3)> = None;
-        for (ti, t) in surface.iter().enumerate() {
-            let (a, b, c) = (bp[corner(t, 0)], bp[corner(t, 1)], bp[corner(t, 2)]);
-            let q = closest_point_on_triangle(p, a, b, c);
-            let d = (q - p).length_squared();
-            if best.is_none_or(|(bd, _, _)| d < bd) {
-                best = Some((d, ti, q));
-            }
-        }
-        let Some((_, ti, q)) = best else {
+        let Some((ti, q)) = closest_triangle(&tree, &tris, p, reach) else {
             continue;
         };
         let t = &surface[ti];
