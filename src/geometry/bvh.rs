@@ -428,7 +428,9 @@ pub fn boxes_meet(alo: DVec3, ahi: DVec3, blo: DVec3, bhi: DVec3) -> bool {
 
 /// The closest point to `p` on the triangles `tris` (indexed by `bvh`, built over
 /// their boxes): boxes of half-width `r` around `p`, doubled until the closest point
-/// found lies within the box. `None` when there is no triangle.
+/// found lies within the box. `None` when there is no triangle. Among equally near
+/// triangles the first visited wins, so on a shared edge the point may differ in the
+/// last bit from [`closest_triangle`]'s (the blend's outputs depend on it).
 pub fn closest_on_triangles(bvh: &Bvh, tris: &[[DVec3; 3]], p: DVec3, r: f64) -> Option<DVec3> {
     let mut r = r.max(f64::MIN_POSITIVE);
     for _ in 0..64 {
@@ -455,18 +457,15 @@ pub fn closest_on_triangles(bvh: &Bvh, tris: &[[DVec3; 3]], p: DVec3, r: f64) ->
 
 /// The triangle of `tris` (indexed by `bvh`, built over their boxes) closest to `p`,
 /// with the closest point on it: the smallest squared distance, ties to the lowest
-/// index, which is what a scan in index order finds. Boxes of half-width `r` around
-/// `p`, doubled until the point found lies within the box (every triangle at most that
-/// far was then visited). `None` when there is no triangle.
+/// index, which is what a scan in index order finds ([`closest_by_scan`]). Boxes of
+/// half-width `r` around `p`, doubled until the point found lies within the box (every
+/// triangle at most that far was then visited). `None` when there is no triangle.
 pub fn closest_triangle(
     bvh: &Bvh,
     tris: &[[DVec3; 3]],
     p: DVec3,
     r: f64,
 ) -> Option<(usize, DVec3)> {
-    let closer = |best: Option<(f64, usize, DVec3)>, d: f64, i: usize| {
-        best.is_none_or(|(bd, bi, _)| d < bd || (d == bd && i < bi))
-    };
     let mut r = r.max(f64::MIN_POSITIVE);
     for _ in 0..64 {
         let mut best: Option<(f64, usize, DVec3)> = None;
@@ -474,7 +473,7 @@ pub fn closest_triangle(
             let [a, b, c] = tris[i];
             let q = closest_point_on_triangle(p, a, b, c);
             let d = (q - p).length_squared();
-            if closer(best, d, i) {
+            if best.is_none_or(|(bd, bi, _)| d < bd || (d == bd && i < bi)) {
                 best = Some((d, i, q));
             }
             false
@@ -484,7 +483,13 @@ pub fn closest_triangle(
         }
         r *= 2.0;
     }
-    // reached only for non-finite input or distances beyond 2^64 r: the scan itself
+    // reached only for non-finite input or distances beyond 2^64 r
+    closest_by_scan(tris, p)
+}
+
+/// [`closest_triangle`] by a scan of every triangle in index order (the first of the
+/// nearest).
+fn closest_by_scan(tris: &[[DVec3; 3]], p: DVec3) -> Option<(usize, DVec3)> {
     let mut best: Option<(f64, usize, DVec3)> = None;
     for (i, &[a, b, c]) in tris.iter().enumerate() {
         let q = closest_point_on_triangle(p, a, b, c);
@@ -718,15 +723,7 @@ mod tests {
             let bvh = Bvh::build(tris.len(), |i| tri_box(&tris[i]));
             for p in &pts {
                 let p = DVec3::from_array(*p);
-                let mut scan: Option<(f64, usize, DVec3)> = None;
-                for (i, &[a, b, c]) in tris.iter().enumerate() {
-                    let q = closest_point_on_triangle(p, a, b, c);
-                    let d = (q - p).length_squared();
-                    if scan.is_none_or(|(bd, _, _)| d < bd) {
-                        scan = Some((d, i, q));
-                    }
-                }
-                let want = scan.map(|(_, i, q)| (i, q));
+                let want = closest_by_scan(&tris, p);
                 prop_assert_eq!(closest_triangle(&bvh, &tris, p, r), want);
             }
             prop_assert_eq!(closest_triangle(&Bvh::build(0, |_| tri_box(&tris[0])), &[], DVec3::ZERO, r), None);
