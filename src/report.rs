@@ -4,7 +4,7 @@
 use crate::io::attrs::AttributesReport;
 use crate::io::Format;
 use crate::mesh::BuildReport;
-use crate::policy::{BlendKeep, BlendSurface, Method, Policy};
+use crate::policy::{BlendKeep, BlendSurface, FairEnergy, Method, Policy};
 use serde::Serialize;
 
 /// Size class of a hole.
@@ -187,6 +187,24 @@ pub struct BlendReport {
     pub moved_vertices: usize,
     /// Mean distance they moved, in mean boundary edge lengths of the hole.
     pub mean_shift: f64,
+    /// How the faired surface's fairing was chosen, with `blend.energy = "validate"`
+    /// on a large hole.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub energy: Option<EnergyChoice>,
+    pub ms: f64,
+}
+
+/// The fairing chosen for a hole's faired surface (`blend.energy = "validate"`).
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct EnergyChoice {
+    /// The candidate whose fairing moved the freed known vertices least (on a tie the
+    /// earlier; `fair` when none could be scored).
+    pub chosen: FairEnergy,
+    /// Rings of known surface freed with the patch (the loop is the first).
+    pub rings: usize,
+    /// Each candidate's mean distance of the freed known vertices from where they
+    /// are, in mean boundary edge lengths of the hole; `None` where its fairing failed.
+    pub scores: Vec<(FairEnergy, Option<f64>)>,
     pub ms: f64,
 }
 

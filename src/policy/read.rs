@@ -47,6 +47,7 @@ pub const SECTIONS: &[(&str, &[&str])] = &[
             "surface",
             "with",
             "keep",
+            "energy",
         ],
     ),
     (
@@ -395,6 +396,7 @@ impl Reader<'_> {
             ("blend", "surface") => p.blend.surface = self.named(key, v)?,
             ("blend", "with") => p.blend.with = self.name_of::<Method>(key, v, "method")?,
             ("blend", "keep") => p.blend.keep = self.named(key, v)?,
+            ("blend", "energy") => p.blend.energy = self.named(key, v)?,
             ("rim", "trim") => p.rim.trim = self.boolean(key, v)?,
             ("rim", "max_rings") => p.rim.max_rings = self.usize(key, v)?,
             ("rim", "max_faces") => p.rim.max_faces = self.usize(key, v)?,

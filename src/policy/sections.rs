@@ -117,6 +117,36 @@ pub struct Blend {
     /// the same (`weight` of the way from the accepted patch to `with`'s), the
     /// triangles are either's.
     pub keep: BlendKeep,
+    /// The fairing of the faired surface (`surface = "faired"`): `fair`, the `[fair]`
+    /// keys on every hole; `validate`, chosen for each large hole among three (the
+    /// `[fair]` keys, the umbrella energy, minimum variation) by which one, with rings
+    /// of the known surface around the patch freed too, moves them least.
+    pub energy: BlendEnergy,
+}
+
+/// How the faired surface is faired (`blend.energy`).
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum BlendEnergy {
+    /// The `[fair]` keys.
+    Fair,
+    /// Chosen per large hole by freeing known rings ([`FairEnergy`]).
+    Validate,
+}
+
+/// A fairing of a patch's new vertices (the candidates of `blend.energy = "validate"`).
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum FairEnergy {
+    /// `Δ^c x = 0` with the `[fair]` keys (by default the thin plate, cotangent weights,
+    /// each Laplacian over its vertex's Voronoi area).
+    Fair,
+    /// The least-squares umbrella energy `Σ_v |x_v − Σ_u w_vu x_u / W_v|²` (the `[fair]`
+    /// weights, each Laplacian over its weight sum `W_v`, every vertex counted alike),
+    /// as MeshLib's `positionVertsSmoothly` fairs a filled hole.
+    Umbrella,
+    /// `Δ³ x = 0` with the `[fair]` weights (minimum variation).
+    MinimumVariation,
 }
 
 /// What an accepted patch is pulled toward (`blend.surface`).
@@ -153,6 +183,7 @@ impl Default for Blend {
             surface: BlendSurface::With,
             with: Method::Wavefront,
             keep: BlendKeep::With,
+            energy: BlendEnergy::Fair,
         }
     }
 }
@@ -692,6 +723,7 @@ macro_rules! policy_names {
 policy_names!(Search { Full => "full", Delaunay => "delaunay", Both => "both" });
 policy_names!(BlendKeep { With => "with", Accepted => "accepted" });
 policy_names!(BlendSurface { With => "with", Faired => "faired" });
+policy_names!(BlendEnergy { Fair => "fair", Validate => "validate" });
 policy_names!(TriangulationWeight { Area => "area", DihedralArea => "dihedral_area" });
 policy_names!(WavefrontPlacement { EdgePlane => "edge_plane", Interpolated => "interpolated" });
 policy_names!(Weights { Uniform => "uniform", Cotangent => "cotangent", Fujiwara => "fujiwara" });

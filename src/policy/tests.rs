@@ -764,3 +764,24 @@ proptest! {
         let _ = parse(&text);
     }
 }
+
+#[test]
+fn blend_energy_reads_and_needs_the_faired_surface() {
+    assert_eq!(Policy::default().blend.energy, BlendEnergy::Fair);
+    let p = parse("[blend]\nweight_large = 0.9\nsurface = \"faired\"\nenergy = \"validate\"\n")
+        .unwrap();
+    assert_eq!(p.blend.energy, BlendEnergy::Validate);
+    let e = err("[blend]\nenergy = \"validate\"\n").to_string();
+    assert!(e.contains("blend.energy") && e.contains("faired"), "{e}");
+    let e = err("[blend]\nsurface = \"faired\"\nenergy = \"validate\"\n[fair]\ncontinuity = 0\n")
+        .to_string();
+    assert!(
+        e.contains("blend.energy") && e.contains("fair.continuity"),
+        "{e}"
+    );
+    let e = err("[blend]\nenergy = \"best\"\n").to_string();
+    assert!(
+        e.contains("blend.energy") && e.contains("\"fair\", \"validate\""),
+        "{e}"
+    );
+}

@@ -2,9 +2,9 @@
 //! A violation names the key (and, for a rule between two keys, says it from either).
 
 use super::{
-    Lssvm, Method, Settings, SmoothScope, MAX_FAIR_PASSES, MAX_FULL_SEARCH, MAX_HOLE_TIME_MS,
-    MAX_HPDE_GENERATIONS, MAX_HPDE_POPULATION_FACTOR, MAX_PATCH_TRIANGLES, MAX_SMOOTH_ITERATIONS,
-    MAX_THREADS, MIN_PATCH_TRIANGLES,
+    BlendEnergy, BlendSurface, Lssvm, Method, Settings, SmoothScope, MAX_FAIR_PASSES,
+    MAX_FULL_SEARCH, MAX_HOLE_TIME_MS, MAX_HPDE_GENERATIONS, MAX_HPDE_POPULATION_FACTOR,
+    MAX_PATCH_TRIANGLES, MAX_SMOOTH_ITERATIONS, MAX_THREADS, MIN_PATCH_TRIANGLES,
 };
 
 /// A range or consistency violation found by [`Policy::validate`].
@@ -146,6 +146,21 @@ impl Settings {
                     "`{}` cannot be blended with: it adds no vertex, so its patch is the loop's own span",
                     self.blend.with.name()
                 ),
+            ));
+        }
+        if self.blend.energy == BlendEnergy::Validate && self.blend.surface != BlendSurface::Faired
+        {
+            return Err(Invalid::new(
+                "blend.energy",
+                "\"validate\" chooses the faired surface's fairing, so it needs blend.surface = \"faired\""
+                    .to_string(),
+            ));
+        }
+        if self.blend.energy == BlendEnergy::Validate && self.fair.continuity == 0 {
+            return Err(Invalid::new(
+                "blend.energy",
+                "\"validate\" fairs the patch, so it needs fair.continuity 1 to 3 (got 0)"
+                    .to_string(),
             ));
         }
 

@@ -14,7 +14,13 @@
 //! the way (weight 1): rows folded over each other are untangled by the thin plate on
 //! their own triangles. The pull is a self-checked method's last step ([`Finisher`],
 //! [`FillContext::finish`]): each patch a variant makes is pulled, relaxed and checked
-//! once. Measured in docs/measurements.md.
+//! once. With `blend.energy = "validate"` a large hole's faired surface is faired by
+//! the one of three fairings that, on the hole's first patch with rings of the known
+//! surface around it freed, moves those known vertices least ([`choose_energy`]):
+//! which fairing continues a surface best differs by mesh (the thin plate on the bench's
+//! armadillo, the umbrella energy on its decimated mesh, minimum variation on its hand),
+//! and nothing read off the rim alone told them apart. Measured in
+//! docs/measurements.md.
 //!
 //! With `blend.surface = "with"`:
 //! Where the lost surface bends, the thin plate (`min_area_fair`) tends to flatten it
@@ -41,11 +47,11 @@ use crate::fill::kit::{relax, Deadline, FillContext};
 use crate::geometry::bvh::{closest_on_triangles, tri_box, Bvh};
 use crate::mesh::Mesh;
 use crate::patch::{Hole, Patch};
-use crate::policy::{BlendKeep, BlendSurface, Method, Policy};
-use crate::report::{Attempt, BlendReport, HoleClass, PatchQuality};
+use crate::policy::{BlendEnergy, BlendKeep, BlendSurface, FairEnergy, Method, Policy};
+use crate::report::{Attempt, BlendReport, EnergyChoice, HoleClass, PatchQuality};
 use glam::DVec3;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Mutex, PoisonError};
+use std::sync::{Mutex, OnceLock, PoisonError};
 use std::time::Instant;
 
 /// The blend weight of a hole of `class` (`blend.weight_middle`, `blend.weight_large`;
@@ -115,6 +121,7 @@ pub fn not_tried(policy: &Policy, hole: &Hole, reason: String) -> BlendReport {
         reason,
         moved_vertices: 0,
         mean_shift: 0.0,
+        energy: None,
         ms: 0.0,
     }
 }
@@ -142,7 +149,7 @@ pub fn blended(
     }
     let (pulled, rep) = match policy.blend.surface {
         BlendSurface::With => pull(mesh, hole, policy, checker, &patch, guide),
-        BlendSurface::Faired => pull_faired(mesh, hole, policy, checker, &patch),
+        BlendSurface::Faired => pull_faired(mesh, hole, policy, checker, &patch, None),
     };
     match pulled {
         Some((pulled, q)) => (pulled, q, Some(rep)),
@@ -283,16 +290,70 @@ pub fn pull(
     (out, rep)
 }
 
+/// The candidates of `blend.energy = "validate"`, in the order a tie goes.
+pub const ENERGIES: [FairEnergy; 3] = [
+    FairEnergy::Fair,
+    FairEnergy::Umbrella,
+    FairEnergy::MinimumVariation,
+];
+
+/// Whether the faired surface's fairing is chosen for `hole` (`blend.energy =
+/// "validate"`, a large hole: measured there, docs/measurements.md).
+pub fn validates_energy(policy: &Policy, hole: &Hole) -> bool {
+    policy.blend.energy == BlendEnergy::Validate && hole.class == HoleClass::Large
+}
+
+/// The fairing for `hole`'s faired surface, chosen on `patch`: each of [`ENERGIES`]
+/// fairs the patch together with `rings` rings of the known surface around it
+/// ([`fair::freed_rings_error`]; the rings are `select`'s growth, [`select::rings_for`]),
+/// and the one that moves the known vertices least wins. A hole is won or lost on how
+/// the surface is continued from its rim inwards; the freed rings ask each energy to
+/// continue the surface from further out over ground that is known.
+pub fn choose_energy(mesh: &Mesh, hole: &Hole, policy: &Policy, patch: &Patch) -> EnergyChoice {
+    let t0 = Instant::now();
+    let rings = select::rings_for(&policy.select, hole.len());
+    let unit = hole.mean_edge_length.max(f64::MIN_POSITIVE);
+    let score = |e: FairEnergy| {
+        let s = fair::freed_rings_error(mesh, hole, patch, &policy.fair, e, rings)
+            .ok()
+            .map(|d| d / unit)
+            .filter(|d| d.is_finite());
+        (e, s)
+    };
+    // three independent solves, side by side (the large holes are the last to finish)
+    let (a, (b, c)) = rayon::join(
+        || score(ENERGIES[0]),
+        || rayon::join(|| score(ENERGIES[1]), || score(ENERGIES[2])),
+    );
+    let scores = vec![a, b, c];
+    let mut chosen: Option<(FairEnergy, f64)> = None;
+    for &(e, s) in &scores {
+        if let Some(s) = s {
+            if chosen.is_none_or(|(_, b)| s < b) {
+                chosen = Some((e, s));
+            }
+        }
+    }
+    EnergyChoice {
+        chosen: chosen.map_or(FairEnergy::Fair, |c| c.0),
+        rings,
+        scores,
+        ms: t0.elapsed().as_secs_f64() * 1000.0,
+    }
+}
+
 /// `patch` (accepted) with each new vertex moved the hole's weight ([`hole_weight`])
-/// of the way to its position in the same patch faired (`[fair]`), relaxed
-/// tangentially and checked ([`BlendSurface::Faired`]), with its quality when it
-/// passes; and what was done.
+/// of the way to its position in the same patch faired (`[fair]`, or the fairing
+/// `blend.energy = "validate"` chooses: `energy` when the caller chose it already,
+/// else chosen here), relaxed tangentially and checked ([`BlendSurface::Faired`]),
+/// with its quality when it passes; and what was done.
 pub fn pull_faired(
     mesh: &Mesh,
     hole: &Hole,
     policy: &Policy,
     checker: &Checker,
     patch: &Patch,
+    energy: Option<EnergyChoice>,
 ) -> (Option<(Patch, PatchQuality)>, BlendReport) {
     let t0 = Instant::now();
     let (w, flat_share) = hole_weight(mesh, hole, policy);
@@ -309,8 +370,14 @@ pub fn pull_faired(
         rep.reason = "fair.continuity is 0: the patch has no faired surface".to_string();
         return (None, rep);
     }
+    rep.energy = match energy {
+        Some(e) => Some(e),
+        None if validates_energy(policy, hole) => Some(choose_energy(mesh, hole, policy, patch)),
+        None => None,
+    };
+    let chosen = rep.energy.as_ref().map_or(FairEnergy::Fair, |e| e.chosen);
     let mut faired = patch.clone();
-    let made = fair::fair_patch(mesh, hole, &mut faired, &policy.fair);
+    let made = fair::fair_patch_energy(mesh, hole, &mut faired, &policy.fair, chosen);
     let t_fair = t0.elapsed();
     let settle = |weight: f64| {
         let (moved, shift) = toward(patch, &faired, weight);
@@ -391,6 +458,9 @@ pub struct Finisher<'a> {
     /// The pulled patches, with their reports.
     done: Mutex<Vec<(Patch, BlendReport)>>,
     failed: AtomicBool,
+    /// The fairing chosen on the first patch (`blend.energy = "validate"`), kept for
+    /// the later variants' patches: one choice per hole.
+    energy: OnceLock<EnergyChoice>,
 }
 
 impl<'a> Finisher<'a> {
@@ -410,6 +480,7 @@ impl<'a> Finisher<'a> {
             method,
             done: Mutex::new(Vec::new()),
             failed: AtomicBool::new(false),
+            energy: OnceLock::new(),
         }
     }
 
@@ -423,7 +494,19 @@ impl<'a> Finisher<'a> {
         {
             return None;
         }
-        let (out, rep) = pull_faired(self.mesh, self.hole, self.policy, self.checker, patch);
+        let energy = validates_energy(self.policy, self.hole).then(|| {
+            self.energy
+                .get_or_init(|| choose_energy(self.mesh, self.hole, self.policy, patch))
+                .clone()
+        });
+        let (out, rep) = pull_faired(
+            self.mesh,
+            self.hole,
+            self.policy,
+            self.checker,
+            patch,
+            energy,
+        );
         let Some((pulled, q)) = out else {
             self.failed.store(true, Ordering::Relaxed);
             return None;
@@ -639,7 +722,7 @@ mod tests {
             let policy = faired_policy(w, None);
             assert!(applies(&policy, &hole, Method::Wavefront, &tent(0.4)));
             assert!(!prefetches(&policy, &hole, Some(Method::MinAreaFair)));
-            let (out, rep) = pull_faired(&mesh, &hole, &policy, &checker, &tent(0.4));
+            let (out, rep) = pull_faired(&mesh, &hole, &policy, &checker, &tent(0.4), None);
             let (p, _) = out.expect("applied");
             assert!(rep.applied, "{rep:?}");
             assert_eq!(rep.surface, BlendSurface::Faired);
@@ -705,7 +788,7 @@ mod tests {
         let mut stray = tent(0.4);
         stray.new_vertices.push(DVec3::new(3.0, 3.0, 1.0));
         let fin = Finisher::new(&mesh, &hole, &policy, &checker, Method::Wavefront);
-        assert!(pull_faired(&mesh, &hole, &policy, &checker, &stray)
+        assert!(pull_faired(&mesh, &hole, &policy, &checker, &stray, None)
             .0
             .is_none());
         assert_eq!(fin.finish(&stray), None);
@@ -733,7 +816,7 @@ mod tests {
         // halfway to the faired apex (the middle of the flat hole) it still folds
         assert!(check(&folded).is_err());
         assert!(check(&fan(8, DVec3::new(4.5, 3.0, 0.0))).is_err());
-        let (out, rep) = pull_faired(&mesh, &hole, &policy, &checker, &folded);
+        let (out, rep) = pull_faired(&mesh, &hole, &policy, &checker, &folded, None);
         let Some((p, _)) = out else {
             panic!("not applied: {rep:?}");
         };
@@ -746,7 +829,7 @@ mod tests {
         // a patch that fails however far it is pulled: a triangle twice over
         let mut twice = tent(0.4);
         twice.triangles.push(twice.triangles[0]);
-        let (out, rep) = pull_faired(&mesh, &hole, &policy, &checker, &twice);
+        let (out, rep) = pull_faired(&mesh, &hole, &policy, &checker, &twice, None);
         assert!(out.is_none() && !rep.applied);
         assert!(
             rep.reason.contains("pulled all the way: "),
@@ -762,7 +845,7 @@ mod tests {
         let checker = Checker::new(&mesh);
         let policy = faired_policy(0.9, Some(0.25));
         assert_eq!(hole_weight(&mesh, &hole, &policy), (0.25, Some(1.0)));
-        let (out, rep) = pull_faired(&mesh, &hole, &policy, &checker, &tent(0.4));
+        let (out, rep) = pull_faired(&mesh, &hole, &policy, &checker, &tent(0.4), None);
         let (p, _) = out.expect("applied");
         assert_eq!((rep.weight, rep.flat_share), (0.25, Some(1.0)));
         assert!(
@@ -777,14 +860,14 @@ mod tests {
         assert_eq!(hole_weight(&sphere, &round, &policy), (0.9, Some(0.0)));
         // a flat weight of 0 leaves the patch as it was, and says why
         let policy = faired_policy(0.9, Some(0.0));
-        let (out, rep) = pull_faired(&mesh, &hole, &policy, &checker, &tent(0.4));
+        let (out, rep) = pull_faired(&mesh, &hole, &policy, &checker, &tent(0.4), None);
         assert!(out.is_none() && !rep.applied, "{rep:?}");
         assert!(rep.reason.contains("weight_flat is 0"), "{rep:?}");
         // without fairing there is no second surface: not applied, and why
         let unfaired = faired_policy(0.9, None)
             .edit(|s| s.fair.continuity = 0)
             .expect("valid");
-        let (out, rep) = pull_faired(&mesh, &hole, &unfaired, &checker, &tent(0.4));
+        let (out, rep) = pull_faired(&mesh, &hole, &unfaired, &checker, &tent(0.4), None);
         assert!(out.is_none() && !rep.applied, "{rep:?}");
         assert!(rep.reason.contains("fair.continuity is 0"), "{rep:?}");
         // small holes are never blended, whatever the flat weight
@@ -946,5 +1029,127 @@ mod tests {
         assert!(applies(&large_only, &large, Method::MinAreaFair, &patch));
         assert_eq!(weight(&large_only, HoleClass::Large), 0.4);
         assert_eq!(weight(&large_only, HoleClass::Small), 0.0);
+    }
+
+    /// A 16 x 16 grid of unit cells with heights `z`, the 4 x 4 cells from (6, 6)
+    /// removed: the mesh, that 16-vertex hole as a large one, and the removed cells as
+    /// its patch (the 9 inner vertices new, `lift` above the surface: the start, from
+    /// which the cotangent weights are read), with the true positions of the new
+    /// vertices.
+    fn grid_hole(z: impl Fn(f64, f64) -> f64, lift: f64) -> (Mesh, Hole, Patch, Vec<DVec3>) {
+        let full = crate::testutil::grid(16, 0.0, 16.0, &z);
+        let inside = |c: DVec3| (6.0..10.0).contains(&c.x) && (6.0..10.0).contains(&c.y);
+        let raw = crate::testutil::cut_faces(full.clone(), inside);
+        let (mesh, lp) = crate::testutil::mesh_and_loop(&raw, |_, l| l.len() == 16);
+        let mut hole = Hole::new(0, &mesh, lp, &Policy::default());
+        hole.class = HoleClass::Large;
+        let loop_pos: Vec<DVec3> = hole.vertices.iter().map(|&v| mesh.pos(v)).collect();
+        let mut patch = Patch::default();
+        let mut truth = Vec::new();
+        let mut new_of: std::collections::HashMap<u32, u32> = Default::default();
+        for f in &full.faces {
+            let c = f.iter().map(|&v| full.positions[v as usize]).sum::<DVec3>() / 3.0;
+            if !inside(c) {
+                continue;
+            }
+            let t = f.map(|v| {
+                let p = full.positions[v as usize];
+                if let Some(i) = loop_pos.iter().position(|&q| q == p) {
+                    return i as u32;
+                }
+                *new_of.entry(v).or_insert_with(|| {
+                    patch.new_vertices.push(p + DVec3::new(0.0, 0.0, lift));
+                    truth.push(p);
+                    (loop_pos.len() + patch.new_vertices.len() - 1) as u32
+                })
+            });
+            patch.triangles.push(t);
+        }
+        (mesh, hole, patch, truth)
+    }
+
+    #[test]
+    fn validation_chooses_minimum_variation_on_a_quartic_and_the_patch_lands_closer() {
+        // Δ³ of a quartic is 0 and its Δ² is not: of the three fairings, only minimum
+        // variation continues the known surface, and the freed rings show it
+        let z = |x: f64, _: f64| 0.02 * (x - 8.0).powi(4) / 16.0;
+        let (mesh, hole, patch, _) = grid_hole(z, 0.2);
+        assert_eq!(patch.new_vertices.len(), 9);
+        let checker = Checker::new(&mesh);
+        let choice = |energy: BlendEnergy| {
+            Policy::default()
+                .edit(|s| {
+                    s.blend.surface = BlendSurface::Faired;
+                    s.blend.weight_large = 1.0;
+                    s.blend.energy = energy;
+                    s.fair.tangential_relax = 0;
+                })
+                .expect("valid")
+        };
+        let validate = choice(BlendEnergy::Validate);
+        let e = choose_energy(&mesh, &hole, &validate, &patch);
+        assert_eq!(e.chosen, FairEnergy::MinimumVariation, "{e:?}");
+        assert_eq!(e.rings, 2);
+        assert_eq!(e.scores.len(), 3);
+        let score = |w: FairEnergy| e.scores.iter().find(|s| s.0 == w).and_then(|s| s.1);
+        let (fair_s, min_var) = (
+            score(FairEnergy::Fair).expect("scored"),
+            score(FairEnergy::MinimumVariation).expect("scored"),
+        );
+        let umbrella = score(FairEnergy::Umbrella).expect("scored");
+        assert!(min_var < 0.5 * fair_s.min(umbrella), "{e:?}");
+        // the pull uses the chosen fairing and reports the choice; its new vertices are
+        // closer to the surface (heights above their own x, y)
+        let error = |p: &Patch| {
+            p.new_vertices
+                .iter()
+                .map(|a| (a.z - z(a.x, a.y)).abs())
+                .fold(0.0, f64::max)
+        };
+        let (out, rep) = pull_faired(&mesh, &hole, &validate, &checker, &patch, None);
+        let (chosen, _) = out.expect("passes");
+        assert_eq!(
+            rep.energy.as_ref().map(|e| e.chosen),
+            Some(FairEnergy::MinimumVariation)
+        );
+        let (plain, rep_plain) = pull_faired(
+            &mesh,
+            &hole,
+            &choice(BlendEnergy::Fair),
+            &checker,
+            &patch,
+            None,
+        );
+        let (plain, _) = plain.expect("passes");
+        assert!(rep_plain.energy.is_none(), "{rep_plain:?}");
+        assert!(
+            error(&chosen) < 0.5 * error(&plain),
+            "chosen {} against the thin plate's {}",
+            error(&chosen),
+            error(&plain)
+        );
+        // a middle hole keeps the [fair] keys' fairing
+        let mut middle = hole.clone();
+        middle.class = HoleClass::Middle;
+        assert!(!validates_energy(&validate, &middle));
+    }
+
+    #[test]
+    fn on_a_plane_every_fairing_puts_the_freed_rings_back() {
+        // a plane is harmonic: every candidate reproduces it, known rings and patch
+        // (the start on the plane: cotangent weights read off a bent start reproduce
+        // it only nearly)
+        let (mesh, hole, patch, _) = grid_hole(|x, y| 0.3 * x - 0.1 * y + 1.0, 0.0);
+        let policy = Policy::default()
+            .edit(|s| {
+                s.blend.surface = BlendSurface::Faired;
+                s.blend.energy = BlendEnergy::Validate;
+            })
+            .expect("valid");
+        let e = choose_energy(&mesh, &hole, &policy, &patch);
+        assert_eq!(e.scores.len(), 3);
+        for (w, s) in &e.scores {
+            assert!(s.expect("scored") < 1e-9, "{w:?}: {e:?}");
+        }
     }
 }

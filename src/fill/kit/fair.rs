@@ -37,13 +37,22 @@
 //! ([`FairSolver`]). When a vertex fell back to uniform weights the matrix is not
 //! symmetric and sparse LU is used instead (also when Cholesky fails). A failed
 //! factorisation or a non-finite result is `FillError::Failed`.
+//!
+//! Three fairings ([`FairEnergy`], the candidates of `blend.energy = "validate"`):
+//! the `[fair]` keys; the umbrella energy (`c = 2`, each Laplacian over the square of
+//! its weight sum: `L S² L`, the least squares of MeshLib's fairing); minimum variation
+//! (`c = 3`). [`freed_rings_error`] scores one on a hole: the patch is faired with rings
+//! of the known surface around it freed too ([`local_freed`]), and the known vertices
+//! move by that mean distance. Measured in docs/measurements.md ("The faired surface's
+//! fairing, chosen per large hole"): no one fairing is closest on every mesh, the
+//! choice by freed rings is closer on each.
 
 use super::FillError;
 use crate::fasthash::HashMap;
 use crate::geometry::measure;
 use crate::mesh::{Mesh, VertexId};
 use crate::patch::{Hole, Patch};
-use crate::policy::{Fair, Weights};
+use crate::policy::{Fair, FairEnergy, Weights};
 use faer::linalg::solvers::Solve;
 use faer::Mat;
 use glam::DVec3;
@@ -68,6 +77,10 @@ pub enum Normalization {
     WeightSum,
     /// Divided by the mixed Voronoi area (Laplace-Beltrami).
     VoronoiArea,
+    /// Divided by the square of the weight sum: for `c = 2` the system is `L S² L`
+    /// (`S = diag(1/W_v)`), the normal equations of the least-squares umbrella energy
+    /// `Σ_v |x_v − Σ_u w_vu x_u / W_v|²` ([`FairEnergy::Umbrella`]).
+    WeightSumSquared,
 }
 
 /// The default normalisation for a weight scheme (see the module docs).
@@ -196,6 +209,13 @@ fn build_operator(local: &LocalMesh, weights: Weights, norm: Normalization) -> O
             Normalization::WeightSum => {
                 if sum[v] > 0.0 {
                     1.0 / sum[v]
+                } else {
+                    1.0
+                }
+            }
+            Normalization::WeightSumSquared => {
+                if sum[v] > 0.0 {
+                    1.0 / (sum[v] * sum[v])
                 } else {
                     1.0
                 }
@@ -458,10 +478,20 @@ pub fn fair_local(
     continuity: u8,
     weights: Weights,
 ) -> Result<(), FillError> {
+    fair_local_with(local, continuity, weights, default_normalization(weights))
+}
+
+/// [`fair_local`] with the Laplacians scaled by `norm`.
+pub fn fair_local_with(
+    local: &mut LocalMesh,
+    continuity: u8,
+    weights: Weights,
+    norm: Normalization,
+) -> Result<(), FillError> {
     if continuity == 0 || !local.free.iter().any(|&f| f) {
         return Ok(());
     }
-    let solver = FairSolver::new(local, continuity, weights, default_normalization(weights))?;
+    let solver = FairSolver::new(local, continuity, weights, norm)?;
     let x = solver.solve()?;
     for (i, &v) in solver.unknowns().iter().enumerate() {
         local.positions[v] = x[i];
@@ -534,16 +564,132 @@ pub fn fair_patch(
     patch: &mut Patch,
     opts: &Fair,
 ) -> Result<(), FillError> {
-    if opts.continuity == 0 || patch.new_vertices.is_empty() {
+    fair_patch_energy(mesh, hole, patch, opts, FairEnergy::Fair)
+}
+
+/// The continuity and the scaling of `energy` under the `[fair]` keys `opts`.
+pub fn energy_setup(energy: FairEnergy, opts: &Fair) -> (u8, Normalization) {
+    match energy {
+        FairEnergy::Fair => (opts.continuity, default_normalization(opts.weights)),
+        FairEnergy::Umbrella => (2, Normalization::WeightSumSquared),
+        FairEnergy::MinimumVariation => (3, default_normalization(opts.weights)),
+    }
+}
+
+/// [`fair_patch`] with `energy`'s continuity and scaling (the `[fair]` weights).
+pub fn fair_patch_energy(
+    mesh: &Mesh,
+    hole: &Hole,
+    patch: &mut Patch,
+    opts: &Fair,
+    energy: FairEnergy,
+) -> Result<(), FillError> {
+    let (c, norm) = energy_setup(energy, opts);
+    if c == 0 || patch.new_vertices.is_empty() {
         return Ok(());
     }
-    let mut local = local_from_patch(mesh, hole, patch, opts.continuity);
-    fair_local(&mut local, opts.continuity, opts.weights)?;
+    let mut local = local_from_patch(mesh, hole, patch, c);
+    fair_local_with(&mut local, c, opts.weights, norm)?;
     let k = hole.len();
     for (j, p) in patch.new_vertices.iter_mut().enumerate() {
         *p = local.positions[k + j];
     }
     Ok(())
+}
+
+/// The patch joined with the mesh around it, where the mesh vertices within `rings - 1`
+/// rings of the loop (the loop is ring 0) are unknowns too, with the faces the
+/// operator needs (those of the vertices within `rings + continuity - 2` rings). With
+/// the local index and the position of each freed mesh vertex. Local vertex `i < k` is
+/// loop vertex `i`, `k + j` new vertex `j`.
+pub fn local_freed(
+    mesh: &Mesh,
+    hole: &Hole,
+    patch: &Patch,
+    rings: usize,
+    continuity: u8,
+) -> (LocalMesh, Vec<(usize, DVec3)>) {
+    let k = hole.len();
+    let mut positions: Vec<DVec3> = hole.vertices.iter().map(|&v| mesh.pos(v)).collect();
+    positions.extend_from_slice(&patch.new_vertices);
+    let mut free = vec![true; positions.len()];
+    let mut freed: Vec<(usize, DVec3)> = (0..k).map(|i| (i, positions[i])).collect();
+    let mut map: HashMap<VertexId, u32> = HashMap::default();
+    let mut depth: HashMap<VertexId, usize> = HashMap::default();
+    for (i, &v) in hole.vertices.iter().enumerate() {
+        map.insert(v, i as u32);
+        depth.insert(v, 0);
+    }
+    let reach = (rings + continuity as usize).saturating_sub(2);
+    let mut ring: Vec<VertexId> = hole.vertices.clone();
+    let mut centres = ring.clone();
+    for d in 1..=reach {
+        let mut next = Vec::new();
+        for &v in &ring {
+            for w in mesh.topo.neighbors(v) {
+                if let std::collections::hash_map::Entry::Vacant(e) = depth.entry(w) {
+                    e.insert(d);
+                    next.push(w);
+                }
+            }
+        }
+        centres.extend_from_slice(&next);
+        ring = next;
+    }
+    let mut faces = crate::fasthash::HashSet::default();
+    for &v in &centres {
+        faces.extend(mesh.topo.vertex_faces(v));
+    }
+    let mut faces: Vec<_> = faces.into_iter().collect();
+    faces.sort_unstable();
+    let mut triangles = patch.triangles.clone();
+    for f in faces {
+        let t = mesh.topo.face(f).map(|v| {
+            *map.entry(v).or_insert_with(|| {
+                let p = mesh.pos(v);
+                let unknown = depth.get(&v).is_some_and(|&d| d < rings);
+                positions.push(p);
+                free.push(unknown);
+                if unknown {
+                    freed.push((positions.len() - 1, p));
+                }
+                (positions.len() - 1) as u32
+            })
+        });
+        triangles.push(t);
+    }
+    (
+        LocalMesh {
+            positions,
+            triangles,
+            free,
+        },
+        freed,
+    )
+}
+
+/// How far fairing with `energy` moves the known surface around a hole: the patch and
+/// the mesh within `rings - 1` rings of the loop are faired together ([`local_freed`]),
+/// and the known vertices among them move from where they are by this mean distance.
+/// An energy that puts the known surface back where it is continues it across the
+/// hole best (`blend.energy = "validate"`).
+pub fn freed_rings_error(
+    mesh: &Mesh,
+    hole: &Hole,
+    patch: &Patch,
+    opts: &Fair,
+    energy: FairEnergy,
+    rings: usize,
+) -> Result<f64, FillError> {
+    let (c, norm) = energy_setup(energy, opts);
+    let (mut local, freed) = local_freed(mesh, hole, patch, rings.max(1), c.max(1));
+    fair_local_with(&mut local, c, opts.weights, norm)?;
+    let n = freed.len().max(1) as f64;
+    Ok(freed
+        .iter()
+        .map(|&(i, p)| (local.positions[i] - p).length())
+        .sum::<f64>()
+        / n)
 }
 
 #[cfg(test)]
@@ -581,6 +727,82 @@ mod tests {
                     assert!((p.z - f(p.x, p.y)).abs() < 1e-9, "c={c} w={w:?} {p}");
                 }
             }
+        }
+    }
+
+    #[test]
+    fn the_umbrella_scaling_reproduces_a_linear_function() {
+        let f = |x: f64, y: f64| -0.4 * x + 0.25 * y + 2.0;
+        for w in [Weights::Cotangent, Weights::Uniform, Weights::Fujiwara] {
+            let mut m = grid(10, f);
+            for (p, &fr) in m.positions.iter_mut().zip(&m.free) {
+                if fr {
+                    p.z = 5.0;
+                }
+            }
+            fair_local_with(&mut m, 2, w, Normalization::WeightSumSquared).unwrap();
+            for p in &m.positions {
+                assert!((p.z - f(p.x, p.y)).abs() < 1e-9, "w={w:?} {p}");
+            }
+        }
+    }
+
+    #[test]
+    fn freeing_rings_frees_the_loop_and_the_rings_inside_the_reach() {
+        use crate::testutil::{fan, sheet, sheet_hole_at};
+        // a 2 x 2 hole in the middle of a 10 x 10 sheet: the operator's rings stay off
+        // the sheet's border (a border vertex's Laplacian is not complete)
+        let (mesh, _) = Mesh::from_raw(&sheet(10, 0.0, &[(4, 4), (5, 4), (4, 5), (5, 5)]));
+        let hole = Hole::new(
+            0,
+            &mesh,
+            sheet_hole_at(&mesh, 0.0),
+            &crate::policy::Policy::default(),
+        );
+        let patch = fan(8, DVec3::new(5.0, 5.0, 0.0));
+        let (local, freed) = local_freed(&mesh, &hole, &patch, 2, 2);
+        assert_eq!(local.free.len(), local.positions.len());
+        // freed: the loop and its neighbours (ring 1), nothing else of the mesh
+        let on_loop: Vec<DVec3> = hole.vertices.iter().map(|&v| mesh.pos(v)).collect();
+        let mut ring1: Vec<VertexId> = Vec::new();
+        for &v in &hole.vertices {
+            for w in mesh.topo.neighbors(v) {
+                if !hole.vertices.contains(&w) && !ring1.contains(&w) {
+                    ring1.push(w);
+                }
+            }
+        }
+        assert_eq!(freed.len(), 8 + ring1.len());
+        for &(i, p) in &freed {
+            assert!(local.free[i] && local.positions[i] == p);
+            assert!(
+                on_loop.contains(&p) || ring1.iter().any(|&w| mesh.pos(w) == p),
+                "{p}"
+            );
+        }
+        assert!(local.free[8], "the new vertex");
+        // every freed vertex's neighbours are there (its Laplacian is complete), and
+        // the vertices beyond ring 1 are fixed
+        for &w in &ring1 {
+            for u in mesh.topo.neighbors(w) {
+                let i = local.positions.iter().position(|&p| p == mesh.pos(u));
+                let i = i.expect("neighbour of ring 1 in the local mesh");
+                let near = hole.vertices.contains(&u) || ring1.contains(&u);
+                assert_eq!(local.free[i], near, "{}", mesh.pos(u));
+            }
+        }
+        // minimum variation reaches one ring further
+        let (local3, freed3) = local_freed(&mesh, &hole, &patch, 2, 3);
+        assert_eq!(freed3.len(), freed.len());
+        assert!(local3.positions.len() > local.positions.len());
+        // the sheet and the fan are flat: every fairing puts every freed vertex back
+        for e in [
+            FairEnergy::Fair,
+            FairEnergy::Umbrella,
+            FairEnergy::MinimumVariation,
+        ] {
+            let err = freed_rings_error(&mesh, &hole, &patch, &Fair::default(), e, 2).unwrap();
+            assert!(err < 1e-9, "{e:?}: {err}");
         }
     }
 
