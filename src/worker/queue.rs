@@ -79,9 +79,23 @@ pub async fn jobs_stream(c: &Conn, n: &Names, s: &QueueSettings) -> Result<strea
         description: Some("holefill: scans waiting for a worker".into()),
         ..Default::default()
     };
-    c.js.get_or_create_stream(cfg)
-        .await
-        .map_err(|e| anyhow!("stream {}: {e}", n.stream))
+    stream_made_or_found(c, cfg).await
+}
+
+/// The stream of `cfg`, made when missing. Two clients starting together (two workers,
+/// or a worker and `submit`) both find it missing and both make it; the server refuses
+/// the second ("subjects overlap with an existing stream"), and then it is there: it
+/// is looked up once more, as [`bucket`] does for an object store.
+async fn stream_made_or_found(c: &Conn, cfg: stream::Config) -> Result<stream::Stream> {
+    let name = cfg.name.clone();
+    match c.js.get_or_create_stream(cfg).await {
+        Ok(s) => Ok(s),
+        Err(e) => {
+            c.js.get_stream(&name)
+                .await
+                .map_err(|_| anyhow!("stream {name}: {e}"))
+        }
+    }
 }
 
 /// The done stream: one notification per finished scan; limits retention with the
@@ -98,9 +112,7 @@ pub async fn done_stream(c: &Conn, n: &Names, s: &QueueSettings) -> Result<strea
         description: Some("holefill: finished scans (repaired or failed)".into()),
         ..Default::default()
     };
-    c.js.get_or_create_stream(cfg)
-        .await
-        .map_err(|e| anyhow!("stream {}: {e}", n.done_stream))
+    stream_made_or_found(c, cfg).await
 }
 
 /// The workers' durable pull consumer: explicit acks, `ack_wait`, at most
