@@ -504,58 +504,7 @@ pub fn fair_local_with(
 /// Local vertex `i < k` is loop vertex `i`, `k + j` is new vertex `j`, then mesh
 /// vertices. Only the new vertices are free.
 pub fn local_from_patch(mesh: &Mesh, hole: &Hole, patch: &Patch, continuity: u8) -> LocalMesh {
-    let k = hole.len();
-    let nn = patch.new_vertices.len();
-    let mut positions: Vec<DVec3> = hole.vertices.iter().map(|&v| mesh.pos(v)).collect();
-    positions.extend_from_slice(&patch.new_vertices);
-    let mut free = vec![false; k];
-    free.resize(k + nn, true);
-    let mut triangles = patch.triangles.clone();
-    let mut map: HashMap<VertexId, u32> = HashMap::default();
-    for (i, &v) in hole.vertices.iter().enumerate() {
-        map.insert(v, i as u32);
-    }
-    if continuity >= 2 {
-        // mesh vertices within continuity - 2 rings of the boundary
-        let mut ring: Vec<VertexId> = hole.vertices.clone();
-        let mut seen: crate::fasthash::HashSet<VertexId> = ring.iter().copied().collect();
-        let mut centres: Vec<VertexId> = ring.clone();
-        for _ in 0..(continuity - 2) {
-            let mut next = Vec::new();
-            for &v in &ring {
-                for w in mesh.topo.neighbors(v) {
-                    if seen.insert(w) {
-                        next.push(w);
-                    }
-                }
-            }
-            centres.extend_from_slice(&next);
-            ring = next;
-        }
-        let mut faces = crate::fasthash::HashSet::default();
-        for &v in &centres {
-            for f in mesh.topo.vertex_faces(v) {
-                faces.insert(f);
-            }
-        }
-        let mut faces: Vec<_> = faces.into_iter().collect();
-        faces.sort_unstable();
-        for f in faces {
-            let t = mesh.topo.face(f).map(|v| {
-                *map.entry(v).or_insert_with(|| {
-                    positions.push(mesh.pos(v));
-                    free.push(false);
-                    (positions.len() - 1) as u32
-                })
-            });
-            triangles.push(t);
-        }
-    }
-    LocalMesh {
-        positions,
-        triangles,
-        free,
-    }
+    local_freed(mesh, hole, patch, 0, continuity).0
 }
 
 /// Fairs a patch: moves only `patch.new_vertices` (see the module docs).
@@ -599,10 +548,11 @@ pub fn fair_patch_energy(
 }
 
 /// The patch joined with the mesh around it, where the mesh vertices within `rings - 1`
-/// rings of the loop (the loop is ring 0) are unknowns too, with the faces the
-/// operator needs (those of the vertices within `rings + continuity - 2` rings). With
-/// the local index and the position of each freed mesh vertex. Local vertex `i < k` is
-/// loop vertex `i`, `k + j` new vertex `j`.
+/// rings of the loop (the loop is ring 0) are unknowns too (`rings = 0`: only the new
+/// vertices, [`local_from_patch`]), with the faces the operator needs: those of the
+/// mesh vertices within `rings + continuity - 2` rings (none when that is negative).
+/// With the local index and the position of each freed mesh vertex. Local vertex
+/// `i < k` is loop vertex `i`, `k + j` new vertex `j`, then mesh vertices.
 pub fn local_freed(
     mesh: &Mesh,
     hole: &Hole,
@@ -613,51 +563,58 @@ pub fn local_freed(
     let k = hole.len();
     let mut positions: Vec<DVec3> = hole.vertices.iter().map(|&v| mesh.pos(v)).collect();
     positions.extend_from_slice(&patch.new_vertices);
-    let mut free = vec![true; positions.len()];
-    let mut freed: Vec<(usize, DVec3)> = (0..k).map(|i| (i, positions[i])).collect();
-    let mut map: HashMap<VertexId, u32> = HashMap::default();
-    let mut depth: HashMap<VertexId, usize> = HashMap::default();
-    for (i, &v) in hole.vertices.iter().enumerate() {
-        map.insert(v, i as u32);
-        depth.insert(v, 0);
-    }
-    let reach = (rings + continuity as usize).saturating_sub(2);
-    let mut ring: Vec<VertexId> = hole.vertices.clone();
-    let mut centres = ring.clone();
-    for d in 1..=reach {
-        let mut next = Vec::new();
-        for &v in &ring {
-            for w in mesh.topo.neighbors(v) {
-                if let std::collections::hash_map::Entry::Vacant(e) = depth.entry(w) {
-                    e.insert(d);
-                    next.push(w);
+    let mut free = vec![rings > 0; k];
+    free.resize(positions.len(), true);
+    let mut freed: Vec<(usize, DVec3)> = if rings > 0 {
+        (0..k).map(|i| (i, positions[i])).collect()
+    } else {
+        Vec::new()
+    };
+    let mut triangles = patch.triangles.clone();
+    if rings + continuity as usize >= 2 {
+        let mut map: HashMap<VertexId, u32> = HashMap::default();
+        let mut depth: HashMap<VertexId, usize> = HashMap::default();
+        for (i, &v) in hole.vertices.iter().enumerate() {
+            map.insert(v, i as u32);
+            depth.insert(v, 0);
+        }
+        let reach = rings + continuity as usize - 2;
+        let mut ring: Vec<VertexId> = hole.vertices.clone();
+        let mut centres = ring.clone();
+        for d in 1..=reach {
+            let mut next = Vec::new();
+            for &v in &ring {
+                for w in mesh.topo.neighbors(v) {
+                    if let std::collections::hash_map::Entry::Vacant(e) = depth.entry(w) {
+                        e.insert(d);
+                        next.push(w);
+                    }
                 }
             }
+            centres.extend_from_slice(&next);
+            ring = next;
         }
-        centres.extend_from_slice(&next);
-        ring = next;
-    }
-    let mut faces = crate::fasthash::HashSet::default();
-    for &v in &centres {
-        faces.extend(mesh.topo.vertex_faces(v));
-    }
-    let mut faces: Vec<_> = faces.into_iter().collect();
-    faces.sort_unstable();
-    let mut triangles = patch.triangles.clone();
-    for f in faces {
-        let t = mesh.topo.face(f).map(|v| {
-            *map.entry(v).or_insert_with(|| {
-                let p = mesh.pos(v);
-                let unknown = depth.get(&v).is_some_and(|&d| d < rings);
-                positions.push(p);
-                free.push(unknown);
-                if unknown {
-                    freed.push((positions.len() - 1, p));
-                }
-                (positions.len() - 1) as u32
-            })
-        });
-        triangles.push(t);
+        let mut faces = crate::fasthash::HashSet::default();
+        for &v in &centres {
+            faces.extend(mesh.topo.vertex_faces(v));
+        }
+        let mut faces: Vec<_> = faces.into_iter().collect();
+        faces.sort_unstable();
+        for f in faces {
+            let t = mesh.topo.face(f).map(|v| {
+                *map.entry(v).or_insert_with(|| {
+                    let p = mesh.pos(v);
+                    let unknown = depth.get(&v).is_some_and(|&d| d < rings);
+                    positions.push(p);
+                    free.push(unknown);
+                    if unknown {
+                        freed.push((positions.len() - 1, p));
+                    }
+                    (positions.len() - 1) as u32
+                })
+            });
+            triangles.push(t);
+        }
     }
     (
         LocalMesh {
