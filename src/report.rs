@@ -205,6 +205,9 @@ pub struct EnergyChoice {
     /// Each candidate's mean distance of the freed known vertices from where they
     /// are, in mean boundary edge lengths of the hole; `None` where its fairing failed.
     pub scores: Vec<(FairEnergy, Option<f64>)>,
+    /// The fairing the patch was pulled toward: `chosen`, or `fair` where the pull
+    /// toward the chosen one failed the checks (the blend's `reason` says so).
+    pub used: FairEnergy,
     pub ms: f64,
 }
 

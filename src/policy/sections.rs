@@ -149,6 +149,17 @@ pub enum FairEnergy {
     MinimumVariation,
 }
 
+impl FairEnergy {
+    /// The name in the repair log.
+    pub fn name(self) -> &'static str {
+        match self {
+            FairEnergy::Fair => "fair",
+            FairEnergy::Umbrella => "umbrella",
+            FairEnergy::MinimumVariation => "minimum_variation",
+        }
+    }
+}
+
 /// What an accepted patch is pulled toward (`blend.surface`).
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
