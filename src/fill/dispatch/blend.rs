@@ -306,15 +306,31 @@ pub fn validates_energy(policy: &Policy, hole: &Hole) -> bool {
     policy.blend.energy == BlendEnergy::Validate && hole.class == HoleClass::Large
 }
 
+/// At most this many rings are freed for the choice by the growth with the loop's
+/// length (`select.vertices_per_ring`); `select.rings` itself is always honoured.
+/// Seeds 1-5: mean APE 5.092 and 4.933 on large holes against 5.117 and 4.955 with
+/// up to 8 rings, at 0.85 of the fill time; held-out seeds 6-8: 5.133 / 4.761 against
+/// 5.149 / 4.772 (docs/measurements.md).
+pub const CHOICE_RINGS_GROWN_MAX: usize = 4;
+
+/// The rings of known surface freed for the choice on a hole of `k` boundary vertices:
+/// `select.rings`, or one per `select.vertices_per_ring` boundary vertices up to
+/// [`CHOICE_RINGS_GROWN_MAX`] when that is more.
+pub fn choice_rings(select: &crate::policy::Select, k: usize) -> usize {
+    select
+        .rings
+        .max(select::rings_for(select, k).min(CHOICE_RINGS_GROWN_MAX))
+}
+
 /// The fairing for `hole`'s faired surface, chosen on `patch`: each of [`ENERGIES`]
-/// fairs the patch together with `rings` rings of the known surface around it
-/// ([`fair::freed_rings_error`]; the rings are `select`'s growth, [`select::rings_for`]),
-/// and the one that moves the known vertices least wins. A hole is won or lost on how
-/// the surface is continued from its rim inwards; the freed rings ask each energy to
-/// continue the surface from further out over ground that is known.
+/// fairs the patch together with rings of the known surface around it
+/// ([`fair::freed_rings_error`], [`choice_rings`]), and the one that moves the known
+/// vertices least wins. A hole is won or lost on how the surface is continued from its
+/// rim inwards; the freed rings ask each energy to continue the surface from further
+/// out over ground that is known.
 pub fn choose_energy(mesh: &Mesh, hole: &Hole, policy: &Policy, patch: &Patch) -> EnergyChoice {
     let t0 = Instant::now();
-    let rings = select::rings_for(&policy.select, hole.len());
+    let rings = choice_rings(&policy.select, hole.len());
     let unit = hole.mean_edge_length.max(f64::MIN_POSITIVE);
     let score = |e: FairEnergy| {
         let s = fair::freed_rings_error(mesh, hole, patch, &policy.fair, e, rings)
@@ -1163,6 +1179,15 @@ mod tests {
         let e = choose_energy(&mesh, &hole, &validate, &patch);
         assert_eq!(e.chosen, FairEnergy::MinimumVariation, "{e:?}");
         assert_eq!(e.rings, 2);
+        // the growth with the loop's length stops at four rings; select.rings is kept
+        let select = &validate.select;
+        assert_eq!(
+            [60, 100, 140, 220].map(|k| choice_rings(select, k)),
+            [2, 4, 4, 4]
+        );
+        let mut six = select.clone();
+        six.rings = 6;
+        assert_eq!(choice_rings(&six, 220), 6);
         assert_eq!(e.scores.len(), 3);
         let score = |w: FairEnergy| e.scores.iter().find(|s| s.0 == w).and_then(|s| s.1);
         let (fair_s, min_var) = (

@@ -46,7 +46,7 @@
 //! move by that mean distance. Measured in docs/measurements.md ("The faired surface's
 //! fairing, chosen per large hole"): no one fairing is closest on every mesh; the
 //! choice by freed rings is closer than the thin plate alone on the large holes of
-//! eight of the bench's nine meshes, and level on the ninth.
+//! eight of the bench's nine meshes (not falconstatue).
 
 use super::FillError;
 use crate::fasthash::HashMap;
