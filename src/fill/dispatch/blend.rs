@@ -1157,6 +1157,31 @@ mod tests {
         (mesh, hole, patch, truth)
     }
 
+    /// The choice's rings grow with the loop's length up to four; `select.rings` is kept.
+    #[test]
+    fn the_choice_frees_rings_grown_with_the_loop_up_to_four() {
+        let select = Policy::default().select.clone();
+        assert_eq!((select.rings, select.vertices_per_ring), (2, 25));
+        assert_eq!(
+            [10, 60, 75, 100, 140, 220].map(|k| choice_rings(&select, k)),
+            [2, 2, 3, 4, 4, 4]
+        );
+        let mut six = select.clone();
+        six.rings = 6;
+        assert_eq!(choice_rings(&six, 220), 6);
+        let mut none = select;
+        none.vertices_per_ring = 0;
+        assert_eq!(choice_rings(&none, 220), 2);
+    }
+
+    /// The names the repair log's reasons give the fairings are its serialised ones.
+    #[test]
+    fn the_fairings_are_named_as_the_log_names_them() {
+        for e in ENERGIES {
+            assert_eq!(serde_json::to_value(e).expect("serialises"), e.name());
+        }
+    }
+
     #[test]
     fn validation_chooses_minimum_variation_on_a_quartic_and_the_patch_lands_closer() {
         // Δ³ of a quartic is 0 and its Δ² is not: of the three fairings, only minimum
@@ -1179,15 +1204,6 @@ mod tests {
         let e = choose_energy(&mesh, &hole, &validate, &patch);
         assert_eq!(e.chosen, FairEnergy::MinimumVariation, "{e:?}");
         assert_eq!(e.rings, 2);
-        // the growth with the loop's length stops at four rings; select.rings is kept
-        let select = &validate.select;
-        assert_eq!(
-            [60, 100, 140, 220].map(|k| choice_rings(select, k)),
-            [2, 4, 4, 4]
-        );
-        let mut six = select.clone();
-        six.rings = 6;
-        assert_eq!(choice_rings(&six, 220), 6);
         assert_eq!(e.scores.len(), 3);
         let score = |w: FairEnergy| e.scores.iter().find(|s| s.0 == w).and_then(|s| s.1);
         let (fair_s, min_var) = (

@@ -308,6 +308,7 @@ impl FairSolver {
             for (u, a) in rows.row(row) {
                 let a = sign * a;
                 if local.free[u] {
+                    // the unknowns are numbered in local order: the columns stay sorted
                     col_idx.push(col[u]);
                     vals.push(a);
                 } else {
