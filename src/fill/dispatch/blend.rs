@@ -345,15 +345,8 @@ pub fn choose_energy(mesh: &Mesh, hole: &Hole, policy: &Policy, patch: &Patch) -
         || rayon::join(|| score(ENERGIES[1]), || score(ENERGIES[2])),
     );
     let scores = vec![a, b, c];
-    let mut chosen: Option<(FairEnergy, f64)> = None;
-    for &(e, s) in &scores {
-        if let Some(s) = s {
-            if chosen.is_none_or(|(_, b)| s < b) {
-                chosen = Some((e, s));
-            }
-        }
-    }
-    let chosen = chosen.map_or(FairEnergy::Fair, |c| c.0);
+    // the lowest score, on a tie the earlier energy, as select's validation picks
+    let chosen = select::lowest_score(scores.iter().copied()).unwrap_or(FairEnergy::Fair);
     EnergyChoice {
         chosen,
         used: chosen,

@@ -240,21 +240,26 @@ pub fn validate(mesh: &Mesh, hole: &Hole, policy: &Policy, candidates: &[Method]
         };
         sel.candidates.push(c);
     }
-    // the lowest score; on a tie the earlier candidate (the list's order)
-    let mut best: Option<(Method, f64)> = None;
-    for c in &sel.candidates {
-        if let Some(s) = c.score.filter(|s| s.is_finite()) {
-            if best.is_none_or(|(_, b)| s < b) {
-                best = Some((c.method, s));
-            }
-        }
-    }
-    match best {
-        Some((m, _)) => sel.winner = Some(m),
+    match lowest_score(sel.candidates.iter().map(|c| (c.method, c.score))) {
+        Some(m) => sel.winner = Some(m),
         None => sel.reason = "no candidate filled the grown hole".into(),
     }
     sel.ms = ms_since(t0);
     sel
+}
+
+/// The item with the lowest finite score; on a tie the earlier one (the list's order).
+/// `None` when nothing has a finite score.
+pub fn lowest_score<T: Copy>(scored: impl IntoIterator<Item = (T, Option<f64>)>) -> Option<T> {
+    let mut best: Option<(T, f64)> = None;
+    for (item, score) in scored {
+        if let Some(s) = score.filter(|s| s.is_finite()) {
+            if best.is_none_or(|(_, b)| s < b) {
+                best = Some((item, s));
+            }
+        }
+    }
+    best.map(|(item, _)| item)
 }
 
 /// A hole grown by some rings, on a copy of the surface around it.
